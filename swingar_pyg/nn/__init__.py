@@ -1,0 +1,6 @@
+"""Graph layers of SwinGar. Needs only torch and torch_geometric."""
+
+from swingar_pyg.nn.fca_conv import FCAConv
+from swingar_pyg.nn.fca_lstm import FCALSTM
+
+__all__ = ["FCAConv", "FCALSTM"]
