@@ -8,7 +8,7 @@ from torch_geometric.data import Batch
 from torch_geometric.nn import GATConv
 from torch_geometric.utils import add_self_loops, to_torch_coo_tensor, to_torch_csc_tensor
 
-from swingar_pyg.nn import FCAConv
+from swingar_pyg.nn import FCAConv, attention_edge_index
 from tests.graphs import sheet_graph
 
 EDGE_INDEX = torch.tensor([[0, 1, 2, 3, 0, 2, 4, 5, 1], [1, 2, 3, 0, 2, 0, 5, 4, 3]])
@@ -141,6 +141,34 @@ def test_dense_and_sparse_adjacency_agree():
         assert torch.allclose(sparse_adj.to_dense(), dense, atol=1e-6)
 
 
+def test_prepared_attention_graph_agrees_and_batches():
+    graphs = [sheet_graph(6, 7, 8, jitter=0.3), sheet_graph(4, 9, 8, seed=3)]
+    conv = FCAConv(8, 4, heads=2)
+    prepared_conv = FCAConv(8, 4, heads=2, add_self_loops=False)
+    prepared_conv.load_state_dict(conv.state_dict())
+    for graph in graphs:
+        expected = conv(graph.x, graph.edge_index)
+        graph.edge_index = attention_edge_index(graph.edge_index, graph.num_nodes)
+        assert graph.edge_index.is_sorted_by_col
+        assert torch.allclose(prepared_conv(graph.x, graph.edge_index), expected, atol=1e-6)
+    batch = Batch.from_data_list(graphs)
+    assert batch.edge_index.is_sorted_by_col
+    out = prepared_conv(batch.x, batch.edge_index)
+    assert torch.allclose(out[batch.ptr[1]:], prepared_conv(graphs[1].x, graphs[1].edge_index),
+                          atol=1e-6)
+
+
+def test_large_alpha_falls_back_to_the_shifted_softmax():
+    x = torch.randn(6, 5, dtype=torch.float64)
+    conv = FCAConv(5, 4, heads=2, alpha=80.0).double()
+    _, (loops, weights) = conv(x, EDGE_INDEX, return_attention_weights=True)
+    _, ref_scores = reference_scores(conv, x, EDGE_INDEX)
+    logits = F.leaky_relu(ref_scores, 0.2)
+    for i in range(6):
+        incoming = loops[1] == i
+        assert torch.allclose(weights[incoming], torch.softmax(logits[incoming], 0))
+
+
 def test_bipartite():
     x_src, x_dst = torch.randn(6, 16), torch.randn(4, 8)
     edge_index = torch.tensor([[1, 2, 3, 4, 5, 0], [0, 0, 1, 2, 3, 3]])
@@ -256,10 +284,19 @@ def test_isolated_nodes_keep_their_own_features():
     assert torch.allclose(out[6:], conv.lin(x[6:]) + conv.bias, atol=1e-6)
 
 
-def test_compiles_without_graph_breaks():
+@pytest.mark.parametrize('backend', [
+    'aot_eager',  # traces forward and backward graphs: proves there is no graph break
+    pytest.param('inductor', marks=pytest.mark.slow),  # generates and compiles C++ (~20 s)
+])
+def test_compiles_without_graph_breaks(backend):
     graph = sheet_graph(6, 6, 8)
     edge_index, _ = add_self_loops(graph.edge_index, num_nodes=graph.num_nodes)
     conv = FCAConv(8, 4, heads=2, add_self_loops=False)
-    expected = conv(graph.x, edge_index)
-    compiled = torch.compile(conv, fullgraph=True, backend='aot_eager')
-    assert torch.allclose(compiled(graph.x, edge_index), expected, atol=1e-6)
+    x = graph.x.requires_grad_()
+    expected = conv(x, edge_index)
+    (expected_grad,) = torch.autograd.grad(expected.square().sum(), x)
+    compiled = torch.compile(conv, fullgraph=True, backend=backend)
+    out = compiled(x, edge_index)
+    (grad,) = torch.autograd.grad(out.square().sum(), x)
+    assert torch.allclose(out, expected, atol=1e-5)
+    assert torch.allclose(grad, expected_grad, atol=1e-4)

@@ -1,0 +1,60 @@
+"""What every benchmark here shares: the machine record, timing, and atomic output."""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import statistics
+import time
+from importlib import metadata
+from pathlib import Path
+from typing import Any, Callable
+
+import torch
+
+from swingar_pyg.atomic import atomic_path
+
+RESULTS = Path(__file__).resolve().parent / "results"
+
+
+def machine_info() -> dict[str, Any]:
+    """Where and with what a benchmark ran, stored with its figures."""
+    versions = {}
+    for package in ("torch", "torch-geometric", "torch-scatter", "scipy", "numpy", "swingar-pyg"):
+        try:
+            versions[package] = metadata.version(package)
+        except metadata.PackageNotFoundError:
+            versions[package] = None
+    return {
+        "platform": platform.platform(),
+        "processor": platform.processor() or platform.machine(),
+        "cpu_count": os.cpu_count(),
+        "torch_threads": torch.get_num_threads(),
+        "python": platform.python_version(),
+        "versions": versions,
+        "date": time.strftime("%Y-%m-%d %H:%M:%S %Z"),
+    }
+
+
+def median_seconds(function: Callable[[], Any], repeats: int, warmup: int = 1) -> float:
+    """Median wall time of ``function`` over ``repeats`` calls, after ``warmup`` calls."""
+    for _ in range(warmup):
+        function()
+    samples = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        function()
+        samples.append(time.perf_counter() - start)
+    return statistics.median(samples)
+
+
+def write_results(name: str, payload: dict[str, Any], figure: Any | None = None) -> Path:
+    """Writes ``results/<name>.json`` (and ``<name>.png``) atomically; returns the JSON path."""
+    json_path = RESULTS / f"{name}.json"
+    with atomic_path(json_path) as tmp:
+        tmp.write_text(json.dumps(payload, indent=2, default=float))
+    if figure is not None:
+        with atomic_path(RESULTS / f"{name}.png") as tmp:
+            figure.savefig(tmp, format="png", dpi=120, bbox_inches="tight")
+    return json_path
