@@ -1,0 +1,55 @@
+"""Collision of cloth vertices with a moving body surface."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from scipy.spatial import cKDTree
+from torch import Tensor
+
+from swingar_pyg.geometry.normals import vertex_normals
+
+
+@dataclass
+class BodyCollider:
+    """A body surface over time: ``vertices`` ``(T, V, 3)`` and ``faces`` ``(F, 3)``.
+
+    Contacts are found once per frame: each cloth vertex is paired with its nearest
+    body vertex (a KD-tree over the body at that frame). Within the frame's
+    substeps, the body vertex and its normal move linearly from the previous
+    frame to this one, and the cloth vertex is kept on the outer side of the
+    plane through them, ``thickness`` away.
+    """
+
+    vertices: Tensor
+    faces: Tensor
+    thickness: float = 0.004
+
+    def __post_init__(self):
+        self.normals = vertex_normals(self.vertices, self.faces)
+
+    @property
+    def num_frames(self) -> int:
+        return self.vertices.shape[0]
+
+    def nearest(self, frame: int, points: Tensor) -> Tensor:
+        """Index of the nearest body vertex at ``frame`` for each point."""
+        tree = cKDTree(self.vertices[frame].detach().cpu().numpy())
+        _, index = tree.query(points.detach().cpu().numpy())
+        return torch.as_tensor(np.asarray(index), device=points.device)
+
+    def planes(self, frame: int, index: Tensor, fraction: float) -> tuple[Tensor, Tensor]:
+        """Contact points and unit normals at ``fraction`` of the way from
+        ``frame - 1`` to ``frame``."""
+        previous = max(frame - 1, 0)
+        point = torch.lerp(self.vertices[previous, index], self.vertices[frame, index], fraction)
+        normal = torch.lerp(self.normals[previous, index], self.normals[frame, index], fraction)
+        return point, torch.nn.functional.normalize(normal, dim=-1, eps=1e-12)
+
+    def signed_distance(self, frame: int, points: Tensor) -> Tensor:
+        """Distance of each point above the tangent plane of its nearest body
+        vertex (negative: inside the body)."""
+        index = self.nearest(frame, points)
+        return ((points - self.vertices[frame, index]) * self.normals[frame, index]).sum(-1)

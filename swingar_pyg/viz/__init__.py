@@ -1,0 +1,1 @@
+"""Pictures of bodies and garments (needs the viz extra: matplotlib)."""

@@ -1,0 +1,176 @@
+"""Garments fitted on a body in its rest pose: procedural skirts of any length, flare,
+resolution and triangulation, with the vertices pinned to the body and the skinning
+weights carried over from the body.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from swingar_pyg.geometry.mesh import Mesh, as_mesh
+
+# Bones whose vertices do not bound a skirt: in the rest A-pose the hands hang beside
+# the hips, but a skirt goes around the pelvis and legs, not around the arms.
+_ARM_BONE_WORDS = ("Shoulder", "Arm", "Hand", "Thumb", "Finger")
+
+
+@dataclass(frozen=True)
+class Garment:
+    """A garment fitted on a body's rest pose.
+
+    Attributes:
+        name: what it is, e.g. ``"skirt-l0.55-f0.40-n1500-irregular"``.
+        mesh: rest vertices (metres, +Z up) and triangles.
+        pinned: indices of the vertices attached to the body (waist, shoulders).
+        skin_indices, skin_weights: ``(N, K)`` body joints each vertex follows in
+            rigid skinning (those of the nearest body vertex).
+    """
+
+    name: str
+    mesh: Mesh
+    pinned: np.ndarray
+    skin_indices: np.ndarray
+    skin_weights: np.ndarray
+
+
+@dataclass(frozen=True)
+class SkirtSpec:
+    """A procedural skirt.
+
+    Attributes:
+        length: waist to hem, metres (0.3 mini ... 1.0 floor-length).
+        flare: how far the hem stands out, as the sine of the cone's half-angle
+            (0 straight, 0.3 A-line, 0.7 circle-like); never inside the body.
+        vertices: about how many vertices.
+        jitter: 0 for a regular quad-grid triangulation; up to 0.4 moves vertices
+            within their cells and flips diagonals (irregular topology).
+        waist_height: waist above the root joint (the hips), metres.
+        clearance: gap kept between body and skirt at rest, metres.
+        seed: for the jitter.
+    """
+
+    length: float = 0.55
+    flare: float = 0.35
+    vertices: int = 1500
+    jitter: float = 0.0
+    waist_height: float = 0.08
+    clearance: float = 0.015
+    seed: int = 0
+
+    def __post_init__(self):
+        if not 0.1 <= self.length <= 1.5:
+            raise ValueError(f"skirt length must be in [0.1, 1.5] m, got {self.length}")
+        if not 0.0 <= self.flare < 1.0:
+            raise ValueError(f"flare must be in [0, 1), got {self.flare}")
+        if self.vertices < 64:
+            raise ValueError(f"a skirt needs at least 64 vertices, got {self.vertices}")
+
+    @property
+    def name(self) -> str:
+        kind = "irregular" if self.jitter > 0 else "grid"
+        return f"skirt-l{self.length:.2f}-f{self.flare:.2f}-n{self.vertices}-{kind}"
+
+
+def body_envelope(vertices: np.ndarray, keep: np.ndarray, heights: np.ndarray,
+                  angles: np.ndarray, band: float = 0.03) -> np.ndarray:
+    """Largest horizontal distance of the kept body vertices from the vertical
+    axis through their centroid, per height and angle: ``(len(heights), len(angles))``.
+
+    A vertex counts for the heights within ``band`` and the nearest angle bins.
+    Where no vertex is found the envelope is 0.
+    """
+    points = vertices[keep]
+    centre = points[:, :2].mean(axis=0)
+    offset = points[:, :2] - centre
+    radius = np.linalg.norm(offset, axis=1)
+    theta = np.arctan2(offset[:, 1], offset[:, 0])
+    bins = len(angles)
+    envelope = np.zeros((len(heights), bins))
+    for k, z in enumerate(heights):
+        near = np.abs(points[:, 2] - z) < band
+        if not near.any():
+            continue
+        index = np.round((theta[near] + math.pi) / (2 * math.pi) * bins).astype(int) % bins
+        row = np.zeros(bins)
+        np.maximum.at(row, index, radius[near])
+        # A vertex covers its neighbouring bins too, so sparse rows have no holes.
+        envelope[k] = np.maximum.reduce([row, np.roll(row, 1), np.roll(row, -1)])
+    return envelope
+
+
+def procedural_skirt(spec: SkirtSpec, body_vertices: np.ndarray, joint_names: tuple[str, ...],
+                     skin_indices: np.ndarray, skin_weights: np.ndarray) -> Garment:
+    """Fits ``spec`` around a body in its rest pose.
+
+    Rings run from the waist (pinned) to the hem; at each ring and angle the radius
+    is the larger of the flared profile and the body's envelope plus clearance.
+    """
+    body_vertices = np.asarray(body_vertices, dtype=np.float64)
+    dominant = skin_indices[np.arange(len(skin_indices)), np.argmax(skin_weights, axis=1)]
+    arm_joints = [j for j, n in enumerate(joint_names) if any(w in n for w in _ARM_BONE_WORDS)]
+    keep = ~np.isin(dominant, arm_joints)
+
+    circumference_guess = 2 * math.pi * 0.2
+    segments = max(8, round(math.sqrt(spec.vertices * circumference_guess / spec.length)))
+    rings = max(3, round(spec.vertices / segments))
+    angles = -math.pi + 2 * math.pi * np.arange(segments) / segments
+    heights = spec.waist_height - spec.length * np.linspace(0.0, 1.0, rings)
+    envelope = body_envelope(body_vertices, keep, heights, angles) + spec.clearance
+    waist = envelope[0]
+    drop = spec.waist_height - heights
+    flared = waist[None, :] + drop[:, None] * math.tan(math.asin(spec.flare))
+    # A skirt hangs from the hips: it never narrows below its widest point above.
+    radius = np.maximum(flared, np.maximum.accumulate(envelope, axis=0))
+
+    centre = body_vertices[keep, :2].mean(axis=0)
+    u = np.arange(segments)[None, :].repeat(rings, 0).astype(np.float64)
+    v = np.arange(rings)[:, None].repeat(segments, 1).astype(np.float64)
+    if spec.jitter > 0:
+        rng = np.random.default_rng(spec.seed)
+        interior = v[:, 0] > 0
+        u[interior] += rng.uniform(-spec.jitter, spec.jitter, size=u[interior].shape)
+        v[interior & (np.arange(rings) < rings - 1)] += rng.uniform(
+            -spec.jitter, spec.jitter, size=v[interior & (np.arange(rings) < rings - 1)].shape)
+    theta = -math.pi + 2 * math.pi * u / segments
+    ring_position = np.clip(v, 0, rings - 1)
+    radius_at = _interpolate_rings(radius, ring_position, u)
+    z = spec.waist_height - spec.length * ring_position / (rings - 1)
+    vertices = np.stack([centre[0] + radius_at * np.cos(theta),
+                         centre[1] + radius_at * np.sin(theta), z], axis=-1).reshape(-1, 3)
+
+    index = np.arange(rings * segments).reshape(rings, segments)
+    a, b = index[:-1], np.roll(index[:-1], -1, axis=1)
+    c, d = np.roll(index[1:], -1, axis=1), index[1:]
+    flip = np.zeros(a.shape, dtype=bool)
+    if spec.jitter > 0:
+        flip = np.random.default_rng(spec.seed + 1).random(a.shape) < 0.5
+    first = np.where(flip[..., None], np.stack([a, b, d], -1), np.stack([a, b, c], -1))
+    second = np.where(flip[..., None], np.stack([b, c, d], -1), np.stack([a, c, d], -1))
+    faces = np.concatenate([first.reshape(-1, 3), second.reshape(-1, 3)])
+    # Outward normals: the ring order runs counter-clockwise seen from above and
+    # rows run downwards, so (a, b, c) faces inward; flip to face outward.
+    mesh = as_mesh(vertices, faces[:, ::-1])
+
+    nearest = cKDTree(body_vertices).query(vertices)[1]
+    return Garment(spec.name, mesh, index[0].copy(), skin_indices[nearest].copy(),
+                   skin_weights[nearest].copy())
+
+
+def _interpolate_rings(radius: np.ndarray, ring_position: np.ndarray,
+                       segment_position: np.ndarray) -> np.ndarray:
+    """Bilinear interpolation of the ``(rings, segments)`` radius table, periodic
+    in the segment direction."""
+    rings, segments = radius.shape
+    r0 = np.clip(np.floor(ring_position).astype(int), 0, rings - 1)
+    r1 = np.clip(r0 + 1, 0, rings - 1)
+    s0 = np.floor(segment_position).astype(int) % segments
+    s1 = (s0 + 1) % segments
+    fr = ring_position - np.floor(ring_position)
+    fs = segment_position - np.floor(segment_position)
+    top = radius[r0, s0] * (1 - fs) + radius[r0, s1] * fs
+    bottom = radius[r1, s0] * (1 - fs) + radius[r1, s1] * fs
+    return top * (1 - fr) + bottom * fr

