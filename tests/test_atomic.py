@@ -10,6 +10,9 @@ def test_success_replaces_the_target(tmp_path):
         assert not target.exists()
     assert target.read_text() == 'new'
     assert list(target.parent.iterdir()) == [target]
+    plain = tmp_path / 'plain.json'
+    plain.write_text('x')
+    assert target.stat().st_mode == plain.stat().st_mode
 
 
 def test_failure_keeps_the_old_file_and_leaves_no_temporary(tmp_path):

@@ -72,9 +72,11 @@ def render_sequence(path: str | Path, body_vertices: np.ndarray, body_faces: np.
         raise ValueError(f"body has {body_vertices.shape[0]} frames, garment "
                          f"{garment_vertices.shape[0]}")
     path = Path(path)
-    everything = np.concatenate([body_vertices.reshape(-1, 3), garment_vertices.reshape(-1, 3)])
-    centre = everything.mean(axis=0)
-    half = 0.55 * np.ptp(everything, axis=0).max()
+    # Each frame is centred on the body (a walk leaves the first frame's view);
+    # the scale is the largest single-frame extent, so the size does not jump.
+    centres = body_vertices.mean(axis=1)
+    half = 0.55 * max(np.ptp(np.concatenate([b, g]), axis=0).max()
+                      for b, g in zip(body_vertices, garment_vertices))
     rotations = [_view_rotation(a) for a in azimuths]
     frames = list(range(0, body_vertices.shape[0], max(1, every)))
     if path.suffix.lower() == ".png":
@@ -84,8 +86,8 @@ def render_sequence(path: str | Path, body_vertices: np.ndarray, body_faces: np.
         figure, axes = plt.subplots(1, len(azimuths), figsize=(3.2 * len(azimuths), 4.2), dpi=80)
         axes = np.atleast_1d(axes)
         for axis, rotation, azimuth in zip(axes, rotations, azimuths):
-            meshes = [(body_vertices[t] - centre, body_faces, _BODY_COLOUR),
-                      (garment_vertices[t] - centre, garment_faces, _GARMENT_COLOUR)]
+            meshes = [(body_vertices[t] - centres[t], body_faces, _BODY_COLOUR),
+                      (garment_vertices[t] - centres[t], garment_faces, _GARMENT_COLOUR)]
             _draw(axis, meshes, rotation)
             axis.set_xlim(-half, half)
             axis.set_ylim(-half, half)

@@ -1,0 +1,59 @@
+"""One ground-truth sequence: a garment on a body of some shape, moving, simulated."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+from torch import Tensor
+
+from swingar_pyg.geometry.skinning import linear_blend_skinning
+from swingar_pyg.sim import BodyCollider, SimulationResult, XPBDCloth, XPBDSettings
+from swingar_pyg.world.body import BodyModel
+from swingar_pyg.world.garment import Garment
+from swingar_pyg.world.motion import Motion
+
+
+@dataclass
+class SimulatedSequence:
+    """Everything a dataset stores about a sequence (DESIGN §7).
+
+    Attributes:
+        garment, motion: what was simulated.
+        body_shape: ``(S,)`` shape parameters of the body.
+        body_vertices: ``(T, V, 3)`` the posed body (recomputable from shape and motion).
+        rigid: ``(T, N, 3)`` the garment rigidly skinned with its transferred weights
+            (the baseline the estimator must beat).
+        result: the simulator's output, cost and residuals.
+    """
+
+    garment: Garment
+    motion: Motion
+    body_shape: Tensor
+    body_vertices: Tensor
+    rigid: Tensor
+    result: SimulationResult
+
+
+def simulate_sequence(body: BodyModel, body_shape: Tensor, garment: Garment, motion: Motion,
+                      settings: XPBDSettings | None = None, device: str = "cpu",
+                      progress: bool = False) -> SimulatedSequence:
+    """Poses the body, drives the garment's pins with the body's skinning, starts
+    the cloth from its rigidly skinned first frame, and simulates."""
+    settings = settings or XPBDSettings(fps=motion.fps)
+    if settings.fps != motion.fps:
+        raise ValueError(f"the motion runs at {motion.fps} fps but the simulator at "
+                         f"{settings.fps}; resample the motion first")
+    if tuple(motion.joint_names) != tuple(body.joint_names):
+        raise ValueError("the motion was made for another rig than this body's")
+    posed = body.pose(body_shape, motion.rotations, motion.translation)
+    rigid = linear_blend_skinning(torch.as_tensor(garment.mesh.vertices, dtype=torch.float32),
+                                  torch.as_tensor(garment.skin_indices),
+                                  torch.as_tensor(garment.skin_weights, dtype=torch.float32),
+                                  posed.joint_transforms)
+    cloth = XPBDCloth(garment.mesh, garment.pinned, settings, device=device)
+    collider = BodyCollider(posed.vertices.to(device), body.faces.to(device),
+                            thickness=settings.thickness)
+    result = cloth.simulate(rigid[0], rigid[:, garment.pinned], collider, progress=progress)
+    return SimulatedSequence(garment, motion, torch.as_tensor(body_shape), posed.vertices,
+                             rigid, result)

@@ -1,0 +1,62 @@
+"""Simulated sequences in HDF5 (DESIGN §7), written atomically.
+
+Layout::
+
+    /garments/<name>/ rest_vertices (N,3) faces (F,3) pinned (P,) skin_indices (N,K)
+                      skin_weights (N,K)
+    /sequences/<id>/  garment_vertices (T,N,3) [chunked by frame, gzip]
+                      rigid_vertices (T,N,3) rotations (T,J,3,3) translation (T,3)
+                      body_shape (S,) seconds_per_frame max_stretch mean_stretch
+                      penetration (T,)
+                      attrs: garment, motion, fps, joint_names, settings (JSON)
+
+Body vertices are not stored: the body model recomputes them from shape and pose.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from swingar_pyg.atomic import atomic_path
+from swingar_pyg.world.sequence import SimulatedSequence
+
+_COMPRESSION = {"compression": "gzip", "compression_opts": 4}
+
+
+def write_sequences(path: str | Path, sequences: list[SimulatedSequence]) -> Path:
+    """Writes ``sequences`` (and each garment once) to a new HDF5 file at ``path``."""
+    import h5py
+
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        with h5py.File(tmp, "w") as file:
+            for index, sequence in enumerate(sequences):
+                garment = sequence.garment
+                if garment.name not in file.get("garments", {}):
+                    group = file.create_group(f"garments/{garment.name}")
+                    group["rest_vertices"] = garment.mesh.vertices.astype(np.float32)
+                    group["faces"] = garment.mesh.faces.astype(np.int32)
+                    group["pinned"] = garment.pinned.astype(np.int32)
+                    group["skin_indices"] = garment.skin_indices.astype(np.int16)
+                    group["skin_weights"] = garment.skin_weights.astype(np.float32)
+                group = file.create_group(f"sequences/{index:06d}")
+                result = sequence.result
+                frames, vertices = result.positions.shape[:2]
+                group.create_dataset("garment_vertices", data=result.positions.numpy(),
+                                     chunks=(1, vertices, 3), **_COMPRESSION)
+                group.create_dataset("rigid_vertices", data=sequence.rigid.numpy(),
+                                     chunks=(1, vertices, 3), **_COMPRESSION)
+                group["rotations"] = sequence.motion.rotations.numpy()
+                group["translation"] = sequence.motion.translation.numpy()
+                group["body_shape"] = sequence.body_shape.numpy()
+                for name in ("seconds_per_frame", "max_stretch", "mean_stretch", "penetration"):
+                    group[name] = getattr(result, name)
+                group.attrs["garment"] = garment.name
+                group.attrs["motion"] = sequence.motion.name
+                group.attrs["fps"] = sequence.motion.fps
+                group.attrs["joint_names"] = json.dumps(list(sequence.motion.joint_names))
+                group.attrs["settings"] = json.dumps(result.settings)
+    return path

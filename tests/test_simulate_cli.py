@@ -1,0 +1,30 @@
+import h5py
+import numpy as np
+import pytest
+
+from swingar_pyg.cli import main
+
+
+def test_simulate_writes_a_sequence_file_and_a_preview(tmp_path, capsys):
+    pytest.importorskip('anny')
+    out = tmp_path / 'run'
+    assert main(['simulate', '--motion', 'twist', '--seconds', '0.4', '--vertices', '200',
+                 '--substeps', '10', '--out', str(out)]) == 0
+    assert 'max stretch' in capsys.readouterr().out
+    with h5py.File(out / 'sequence.h5') as file:
+        sequence = file['sequences/000000']
+        garment = file['garments'][sequence.attrs['garment']]
+        frames = len(sequence['rotations'])
+        assert frames == 12
+        assert sequence['garment_vertices'].shape == (frames, len(garment['rest_vertices']), 3)
+        assert np.isfinite(sequence['garment_vertices'][:]).all()
+        assert sequence.attrs['fps'] == 30.0
+    assert (out / 'preview.gif').stat().st_size > 0
+    assert sorted(p.name for p in out.iterdir()) == ['preview.gif', 'sequence.h5']
+
+
+def test_simulate_rejects_an_unknown_motion(tmp_path, capsys):
+    pytest.importorskip('anny')
+    with pytest.raises(SystemExit):
+        main(['simulate', '--motion', 'moonwalk', '--out', str(tmp_path)])
+    assert "unknown motion 'moonwalk'" in capsys.readouterr().err
