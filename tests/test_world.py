@@ -127,15 +127,17 @@ def test_anny_rejects_bad_input(anny_body):
                        torch.zeros(2, 3))
 
 
-def test_skirt_swings_on_a_swaying_body_without_stretch_or_penetration(anny_body):
+def test_skirt_swings_on_a_walking_body_without_stretch_or_penetration(anny_body):
     from swingar_pyg.sim import BodyCollider, XPBDCloth, XPBDSettings
 
     shape = anny_body.default_shape()
     rest = anny_body.rest_vertices(shape)
     indices, weights = anny_body.skinning()
-    garment = procedural_skirt(SkirtSpec(vertices=600), rest.numpy(), anny_body.joint_names,
+    garment = procedural_skirt(SkirtSpec(vertices=800), rest.numpy(), anny_body.joint_names,
                                indices.numpy(), weights.numpy())
-    motion = procedural_motion('sway', anny_body.joint_names, seconds=1.5)
+    # Walking swings the thighs into the skirt: the case that once pushed cloth
+    # through a leg (contacts paired against the body's end-of-frame pose).
+    motion = procedural_motion('walk', anny_body.joint_names, seconds=2.0)
     posed = anny_body.pose(shape, motion.rotations, motion.translation)
     skinned = linear_blend_skinning(torch.from_numpy(garment.mesh.vertices).float(),
                                     torch.from_numpy(garment.skin_indices),
@@ -145,7 +147,7 @@ def test_skirt_swings_on_a_swaying_body_without_stretch_or_penetration(anny_body
     result = cloth.simulate(skinned[0], skinned[:, garment.pinned],
                             BodyCollider(posed.vertices, anny_body.faces))
     assert torch.isfinite(result.positions).all()
-    assert result.max_stretch.max() < 0.06
+    assert result.max_stretch.max() < 0.12
     assert np.nanmax(result.penetration) == 0
-    # The hem lags behind the hips (rigid skinning would carry it along).
+    # The hem lags and swings (rigid skinning would carry it along).
     assert (result.positions - skinned).norm(dim=-1).max() > 0.02

@@ -126,3 +126,30 @@ def test_bad_inputs_raise():
         cloth.simulate(initial * float('nan'), initial[top][None])
     with pytest.raises(ValueError, match='pinned indices'):
         XPBDCloth(mesh, np.array([999]), XPBDSettings())
+
+
+def test_a_fast_body_pushes_cloth_ahead_instead_of_passing_through():
+    # A thigh-sized ball moving farther per frame (9 cm) than its radius (6 cm) into
+    # a hanging curtain. Pairing cloth with the body where it will be at the end of
+    # the frame puts cloth ahead of it nearer its back, and pushes it out through it.
+    radius = 0.06
+    ball = trimesh.creation.icosphere(subdivisions=3, radius=radius)
+    frames = 6
+    path = torch.zeros(frames, 1, 3)
+    path[:, 0, 1] = torch.linspace(-0.25, 0.2, frames)  # along +y, into the curtain
+    path[:, 0, 2] = 0.2  # the curtain's mid-height
+    vertices = torch.tensor(ball.vertices, dtype=torch.float32)[None] + path
+    collider = BodyCollider(vertices, torch.tensor(ball.faces))
+    mesh, top = hanging_sheet(12, 12, size=0.4)
+    mesh = as_mesh(mesh.vertices - [0.2, 0.0, 0.0], mesh.faces)
+    _, result = run(mesh, top, frames=frames, collider=collider,
+                    settings=XPBDSettings(substeps=20, settle_frames=0))
+    contacts = 0
+    for frame in range(frames):
+        centre = vertices[frame].mean(dim=0)
+        cloth = result.positions[frame]
+        in_silhouette = (cloth[:, [0, 2]] - centre[[0, 2]]).norm(dim=-1) < 0.9 * radius
+        assert (cloth[in_silhouette, 1] > centre[1]).all()  # in front, never behind
+        assert (cloth - centre).norm(dim=-1).min() > radius - 0.001  # never inside
+        contacts += int(in_silhouette.sum())
+    assert contacts > 0

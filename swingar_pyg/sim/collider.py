@@ -16,11 +16,12 @@ from swingar_pyg.geometry.normals import vertex_normals
 class BodyCollider:
     """A body surface over time: ``vertices`` ``(T, V, 3)`` and ``faces`` ``(F, 3)``.
 
-    Contacts are found once per frame: each cloth vertex is paired with its nearest
-    body vertex (a KD-tree over the body at that frame). Within the frame's
-    substeps, the body vertex and its normal move linearly from the previous
-    frame to this one, and the cloth vertex is kept on the outer side of the
-    plane through them, ``thickness`` away.
+    Each cloth vertex is paired with its nearest body vertex, found in the body as
+    it is at that moment (linearly between the previous frame and this one): a
+    pairing against the body's end-of-frame pose would put cloth ahead of a fast
+    limb inside it, and push it out through the wrong side. Within a frame the
+    body vertex and its normal move linearly, and the cloth vertex is kept on
+    the outer side of the plane through them, ``thickness`` away.
     """
 
     vertices: Tensor
@@ -34,10 +35,11 @@ class BodyCollider:
     def num_frames(self) -> int:
         return self.vertices.shape[0]
 
-    def nearest(self, frame: int, points: Tensor) -> Tensor:
-        """Index of the nearest body vertex at ``frame`` for each point."""
-        tree = cKDTree(self.vertices[frame].detach().cpu().numpy())
-        _, index = tree.query(points.detach().cpu().numpy())
+    def nearest(self, frame: int, points: Tensor, fraction: float = 1.0) -> Tensor:
+        """Index of the nearest body vertex for each point, with the body at
+        ``fraction`` of the way from ``frame - 1`` to ``frame``."""
+        body = torch.lerp(self.vertices[max(frame - 1, 0)], self.vertices[frame], fraction)
+        _, index = cKDTree(body.detach().cpu().numpy()).query(points.detach().cpu().numpy())
         return torch.as_tensor(np.asarray(index), device=points.device)
 
     def planes(self, frame: int, index: Tensor, fraction: float) -> tuple[Tensor, Tensor]:
