@@ -26,14 +26,19 @@ from swingar_pyg.world.sequence import SimulatedSequence
 _COMPRESSION = {"compression": "gzip", "compression_opts": 4}
 
 
-def write_sequences(path: str | Path, sequences: list[SimulatedSequence]) -> Path:
-    """Writes ``sequences`` (and each garment once) to a new HDF5 file at ``path``."""
+def write_sequences(path: str | Path, sequences: list[SimulatedSequence],
+                    ids: list[str] | None = None) -> Path:
+    """Writes ``sequences`` (and each garment once) to a new HDF5 file at ``path``,
+    as ``/sequences/<id>`` (default ids: ``000000``, ``000001``, ...)."""
     import h5py
 
     path = Path(path)
+    ids = ids or [f"{index:06d}" for index in range(len(sequences))]
+    if len(ids) != len(sequences) or len(set(ids)) != len(ids):
+        raise ValueError("give one distinct id per sequence")
     with atomic_path(path) as tmp:
         with h5py.File(tmp, "w") as file:
-            for index, sequence in enumerate(sequences):
+            for sequence_id, sequence in zip(ids, sequences):
                 garment = sequence.garment
                 if garment.name not in file.get("garments", {}):
                     group = file.create_group(f"garments/{garment.name}")
@@ -42,7 +47,7 @@ def write_sequences(path: str | Path, sequences: list[SimulatedSequence]) -> Pat
                     group["pinned"] = garment.pinned.astype(np.int32)
                     group["skin_indices"] = garment.skin_indices.astype(np.int16)
                     group["skin_weights"] = garment.skin_weights.astype(np.float32)
-                group = file.create_group(f"sequences/{index:06d}")
+                group = file.create_group(f"sequences/{sequence_id}")
                 result = sequence.result
                 frames, vertices = result.positions.shape[:2]
                 group.create_dataset("garment_vertices", data=result.positions.numpy(),
@@ -59,4 +64,24 @@ def write_sequences(path: str | Path, sequences: list[SimulatedSequence]) -> Pat
                 group.attrs["fps"] = sequence.motion.fps
                 group.attrs["joint_names"] = json.dumps(list(sequence.motion.joint_names))
                 group.attrs["settings"] = json.dumps(result.settings)
+    return path
+
+
+def merge_sequence_files(parts: list[Path], path: str | Path) -> Path:
+    """Copies the sequences and garments of ``parts`` into one new file at ``path``
+    (garments once each; sequence ids must not repeat)."""
+    import h5py
+
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        with h5py.File(tmp, "w") as merged:
+            for part in parts:
+                with h5py.File(part, "r") as source:
+                    for name in source.get("garments", {}):
+                        if name not in merged.get("garments", {}):
+                            source.copy(source[f"garments/{name}"], merged, f"garments/{name}")
+                    for name in source.get("sequences", {}):
+                        if name in merged.get("sequences", {}):
+                            raise ValueError(f"sequence {name} is in more than one part")
+                        source.copy(source[f"sequences/{name}"], merged, f"sequences/{name}")
     return path

@@ -1,0 +1,210 @@
+"""Ground-truth datasets: garments x motions x body shapes, simulated, in HDF5 per split.
+
+Generation is a list of jobs (one sequence each) in a fixed order. Each job writes
+its own part file atomically, so a killed run resumes where it stopped and never
+keeps half a sequence; ``--shard i/n`` takes every n-th job for spreading over
+machines; worker processes (one torch thread each) share a machine. When every
+part of a split exists, the parts are merged into ``<output>/<split>.h5``.
+Splits are by garment and by motion: the config lists each split's own garments
+and motions, and :func:`plan_jobs` refuses a garment or motion in two splits.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from multiprocessing import get_context
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from swingar_pyg.atomic import atomic_path
+from swingar_pyg.sim.xpbd import XPBDSettings
+from swingar_pyg.world.garment import SkirtSpec
+from swingar_pyg.world.sequence_file import merge_sequence_files, write_sequences
+
+SPLITS = ("train", "val", "test")
+
+
+@dataclass(frozen=True)
+class MotionSpec:
+    """A procedural motion with its augmentation."""
+
+    kind: str
+    speed: float = 1.0
+    amplitude: float = 1.0
+    mirror: bool = False
+
+
+@dataclass(frozen=True)
+class DatasetConfig:
+    """What to generate (see ``configs/data/*.yaml``)."""
+
+    name: str
+    output: str
+    seconds: float
+    fps: float
+    body_shapes: tuple[tuple[float, ...], ...]
+    garments: dict[str, tuple[SkirtSpec, ...]]
+    motions: dict[str, tuple[MotionSpec, ...]]
+    solver: XPBDSettings
+
+    @classmethod
+    def from_yaml(cls, path: str | Path) -> "DatasetConfig":
+        import yaml
+
+        raw = yaml.safe_load(Path(path).read_text())
+        try:
+            splits = raw["splits"]
+            unknown = set(splits) - set(SPLITS)
+            if unknown:
+                raise ValueError(f"unknown splits {sorted(unknown)}; use {', '.join(SPLITS)}")
+            return cls(
+                name=str(raw["name"]), output=str(raw["output"]),
+                seconds=float(raw["seconds"]), fps=float(raw.get("fps", 30.0)),
+                body_shapes=tuple(tuple(float(v) for v in s) for s in raw["body_shapes"]),
+                garments={split: tuple(SkirtSpec(**g) for g in spec["garments"])
+                          for split, spec in splits.items()},
+                motions={split: tuple(MotionSpec(**m) for m in spec["motions"])
+                         for split, spec in splits.items()},
+                solver=XPBDSettings(fps=float(raw.get("fps", 30.0)), **raw.get("solver", {})),
+            )
+        except KeyError as missing:
+            raise ValueError(f"{path}: the config needs {missing}") from None
+        except TypeError as error:
+            raise ValueError(f"{path}: {error}") from None
+
+
+@dataclass(frozen=True)
+class Job:
+    split: str
+    index: int
+    garment: SkirtSpec
+    motion: MotionSpec
+    shape_index: int
+    shape: tuple[float, ...]
+
+    @property
+    def id(self) -> str:
+        return f"{self.split}-{self.index:05d}"
+
+
+def plan_jobs(config: DatasetConfig) -> list[Job]:
+    """Every (garment, motion, body shape) of every split, in a fixed order."""
+    for kind, items in (("garment", config.garments), ("motion", config.motions)):
+        seen: dict[Any, str] = {}
+        for split, specs in items.items():
+            for spec in specs:
+                key = spec.kind if kind == "motion" else spec
+                if key in seen and seen[key] != split:
+                    raise ValueError(f"{kind} {key} is in both the {seen[key]} and the "
+                                     f"{split} split; splits must not share {kind}s")
+                seen[key] = split
+    jobs = []
+    for split in SPLITS:
+        combos = [(g, m, k) for g in config.garments.get(split, ())
+                  for m in config.motions.get(split, ()) for k in range(len(config.body_shapes))]
+        jobs += [Job(split, i, g, m, k, config.body_shapes[k]) for i, (g, m, k) in enumerate(combos)]
+    return jobs
+
+
+def _part_path(output: Path, job: Job) -> Path:
+    return output / "parts" / job.split / f"{job.id}.h5"
+
+
+def _run_job(job: Job, fps: float, seconds: float, solver: XPBDSettings, part: str) -> dict:
+    import torch
+
+    from swingar_pyg.world.body import AnnyBody
+    from swingar_pyg.world.garment import procedural_skirt
+    from swingar_pyg.world.motion import procedural_motion
+    from swingar_pyg.world.sequence import simulate_sequence
+
+    torch.set_num_threads(1)
+    body = AnnyBody()
+    shape = torch.tensor(job.shape)
+    indices, weights = body.skinning()
+    garment = procedural_skirt(job.garment, body.rest_vertices(shape).numpy(), body.joint_names,
+                               indices.numpy(), weights.numpy())
+    garment = dataclasses.replace(garment, name=f"{garment.name}@shape{job.shape_index}")
+    motion = procedural_motion(job.motion.kind, body.joint_names, seconds=seconds, fps=fps,
+                               amplitude=job.motion.amplitude, speed=job.motion.speed,
+                               mirror=job.motion.mirror)
+    sequence = simulate_sequence(body, shape, garment, motion, solver)
+    write_sequences(part, [sequence], ids=[job.id])
+    result = sequence.result
+    return {"id": job.id, "vertices": garment.mesh.num_vertices, "frames": motion.num_frames,
+            "ms_per_frame": 1e3 * float(np.median(result.seconds_per_frame)),
+            "max_stretch": float(result.max_stretch.max()),
+            "max_penetration": float(np.nanmax(result.penetration))}
+
+
+def make_dataset(config: DatasetConfig, output: str | Path | None = None,
+                 shard: tuple[int, int] = (0, 1), workers: int = 1,
+                 progress: bool = True) -> dict:
+    """Generates this shard's missing parts, then merges every complete split.
+
+    Returns a summary: per split, the sequences and the simulator's figures.
+    """
+    index, count = shard
+    if not 0 <= index < count:
+        raise ValueError(f"shard must be i/n with 0 <= i < n, got {index}/{count}")
+    if workers < 1:
+        raise ValueError(f"workers must be >= 1, got {workers}")
+    output = Path(output or config.output)
+    jobs = plan_jobs(config)
+    mine = [job for k, job in enumerate(jobs) if k % count == index]
+    todo = [job for job in mine if not _part_path(output, job).exists()]
+    start = time.perf_counter()
+    reports = []
+    if todo:
+        bar = None
+        if progress:
+            from tqdm import tqdm
+
+            bar = tqdm(total=len(todo), desc=f"{config.name} shard {index}/{count}",
+                       unit="sequence")
+        arguments = [(job, config.fps, config.seconds, config.solver,
+                      str(_part_path(output, job))) for job in todo]
+        for job in todo:
+            _part_path(output, job).parent.mkdir(parents=True, exist_ok=True)
+        if workers == 1:
+            for args in arguments:
+                reports.append(_run_job(*args))
+                if bar:
+                    bar.update()
+        else:
+            with ProcessPoolExecutor(workers, mp_context=get_context("spawn")) as pool:
+                futures = [pool.submit(_run_job, *args) for args in arguments]
+                for future in as_completed(futures):
+                    reports.append(future.result())
+                    if bar:
+                        bar.update()
+        if bar:
+            bar.close()
+
+    summary: dict = {"name": config.name, "output": str(output), "shard": f"{index}/{count}",
+                     "generated": len(reports), "skipped_existing": len(mine) - len(todo),
+                     "seconds": time.perf_counter() - start, "splits": {}}
+    for split in SPLITS:
+        parts = [_part_path(output, job) for job in jobs if job.split == split]
+        if not parts:
+            continue
+        complete = all(p.exists() for p in parts)
+        if complete:
+            merge_sequence_files(parts, output / f"{split}.h5")
+        summary["splits"][split] = {"sequences": len(parts), "complete": complete,
+                                    "garments": len(config.garments.get(split, ())),
+                                    "motions": [m.kind for m in config.motions.get(split, ())]}
+    if reports:
+        summary["simulation"] = {
+            "ms_per_frame_median": float(np.median([r["ms_per_frame"] for r in reports])),
+            "max_stretch": float(max(r["max_stretch"] for r in reports)),
+            "max_penetration": float(max(r["max_penetration"] for r in reports))}
+    with atomic_path(output / f"summary-shard{index}of{count}.json") as tmp:
+        tmp.write_text(json.dumps(summary, indent=2))
+    return summary

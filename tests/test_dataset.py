@@ -1,0 +1,92 @@
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from swingar_pyg.world.dataset import DatasetConfig, make_dataset, plan_jobs
+
+TINY = """
+name: tiny
+output: {output}
+seconds: 0.2
+fps: 30
+solver: {{substeps: 8, iterations: 2, settle_frames: 1}}
+body_shapes: [[0.5, 0.5, 0.5, 0.5, 0.5, 0.5]]
+splits:
+  train:
+    garments: [{{length: 0.4, flare: 0.3, vertices: 120}}, {{length: 0.5, vertices: 150, jitter: 0.3}}]
+    motions: [{{kind: sway}}]
+  test:
+    garments: [{{length: 0.6, flare: 0.4, vertices: 130}}]
+    motions: [{{kind: twist}}]
+"""
+
+
+def tiny_config(tmp_path: Path, text: str = TINY) -> DatasetConfig:
+    path = tmp_path / 'tiny.yaml'
+    path.write_text(text.format(output=tmp_path / 'data'))
+    return DatasetConfig.from_yaml(path)
+
+
+def test_shipped_configs_plan_disjoint_splits():
+    root = Path(__file__).resolve().parents[1] / 'configs' / 'data'
+    for name in ('quickstart', 'full'):
+        config = DatasetConfig.from_yaml(root / f'{name}.yaml')
+        jobs = plan_jobs(config)
+        kinds = {split: {job.motion.kind for job in jobs if job.split == split}
+                 for split in ('train', 'val', 'test')}
+        assert not (kinds['train'] & kinds['test']) and not (kinds['train'] & kinds['val'])
+        garments = {split: {job.garment for job in jobs if job.split == split}
+                    for split in ('train', 'test')}
+        assert not garments['train'] & garments['test']
+        assert len({job.id for job in jobs}) == len(jobs)
+
+
+def test_a_motion_family_in_two_splits_is_refused(tmp_path):
+    text = TINY.replace('motions: [{{kind: twist}}]', 'motions: [{{kind: sway, speed: 2}}]')
+    with pytest.raises(ValueError, match="motion sway is in both the train and the test split"):
+        plan_jobs(tiny_config(tmp_path, text))
+
+
+def test_config_errors_name_the_problem(tmp_path):
+    with pytest.raises(ValueError, match="needs 'body_shapes'"):
+        tiny_config(tmp_path, TINY.replace('body_shapes', 'shapes'))
+    with pytest.raises(ValueError, match="unknown splits"):
+        tiny_config(tmp_path, TINY.replace('test:', 'holdout:'))
+    with pytest.raises(ValueError, match="flare"):
+        tiny_config(tmp_path, TINY.replace('flare: 0.4', 'flare: 4'))
+
+
+def test_generation_resumes_and_merges(tmp_path):
+    pytest.importorskip('anny')
+    config = tiny_config(tmp_path)
+    first = make_dataset(config, progress=False)
+    assert first['generated'] == 3 and first['splits']['train']['complete']
+    output = tmp_path / 'data'
+    with h5py.File(output / 'train.h5') as file:
+        assert sorted(file['sequences']) == ['train-00000', 'train-00001']
+        assert len(file['garments']) == 2
+        reference = file['sequences/train-00001/garment_vertices'][:]
+        assert np.isfinite(reference).all()
+    # A killed run leaves some parts; only the missing ones are simulated again.
+    (output / 'parts' / 'train' / 'train-00001.h5').unlink()
+    (output / 'train.h5').unlink()
+    again = make_dataset(config, progress=False)
+    assert again['generated'] == 1 and again['skipped_existing'] == 2
+    with h5py.File(output / 'train.h5') as file:
+        assert np.array_equal(file['sequences/train-00001/garment_vertices'][:], reference)
+
+
+def test_shards_split_the_jobs_and_merge_when_all_are_done(tmp_path):
+    pytest.importorskip('anny')
+    config = tiny_config(tmp_path)
+    first = make_dataset(config, shard=(0, 2), progress=False)
+    assert first['generated'] == 2  # jobs 0 and 2 of 3
+    assert not first['splits']['train']['complete']
+    assert not (tmp_path / 'data' / 'train.h5').exists()
+    second = make_dataset(config, shard=(1, 2), progress=False)
+    assert second['generated'] == 1 and second['splits']['train']['complete']
+    assert (tmp_path / 'data' / 'train.h5').exists() and (tmp_path / 'data' / 'test.h5').exists()
+    with pytest.raises(ValueError, match='shard must be i/n'):
+        make_dataset(config, shard=(2, 2), progress=False)
