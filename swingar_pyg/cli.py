@@ -26,7 +26,7 @@ def _simulate(args: argparse.Namespace) -> int:
     from swingar_pyg.viz.preview import render_sequence
     from swingar_pyg.world.body import AnnyBody
     from swingar_pyg.world.garment import SkirtSpec, procedural_skirt
-    from swingar_pyg.world.motion import procedural_motion
+    from swingar_pyg.world.motion_library import make_motion
     from swingar_pyg.world.sequence import simulate_sequence
     from swingar_pyg.world.sequence_file import write_sequences
 
@@ -38,9 +38,8 @@ def _simulate(args: argparse.Namespace) -> int:
                      jitter=args.jitter)
     garment = procedural_skirt(spec, body.rest_vertices(shape).numpy(), body.joint_names,
                                indices.numpy(), weights.numpy())
-    motion = procedural_motion(args.motion, body.joint_names, seconds=args.seconds,
-                               fps=args.fps, amplitude=args.amplitude, speed=args.speed,
-                               mirror=args.mirror)
+    motion = make_motion(args.motion, body, shape, seconds=args.seconds, fps=args.fps,
+                         speed=args.speed, amplitude=args.amplitude, mirror=args.mirror)
     settings = XPBDSettings(fps=args.fps, substeps=args.substeps, iterations=args.iterations)
     sequence = simulate_sequence(body, shape, garment, motion, settings, progress=True)
     out = Path(args.out)
@@ -105,7 +104,10 @@ def build_parser() -> argparse.ArgumentParser:
     simulate = commands.add_parser(
         "simulate", help="simulate a procedural skirt on the anny body: HDF5 + preview GIF")
     simulate.add_argument("--motion", default="sway",
-                          help="sway, twist, spin_stop, kick, jump or walk (default: sway)")
+                          help="a procedural family (sway, twist, spin_stop, kick, jump, walk), "
+                               "a shipped CMU clip (cmu_02_01_walk_delfem2, "
+                               "cmu_02_03_run_cgspeed_style, cmu_12_03_walk_makehuman) or a .bvh "
+                               "path (default: sway)")
     simulate.add_argument("--seconds", type=float, default=3.0)
     simulate.add_argument("--fps", type=float, default=30.0)
     simulate.add_argument("--amplitude", type=float, default=1.0)

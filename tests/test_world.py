@@ -151,3 +151,18 @@ def test_skirt_swings_on_a_walking_body_without_stretch_or_penetration(anny_body
     assert np.nanmax(result.penetration) == 0
     # The hem lags and swings (rigid skinning would carry it along).
     assert (result.positions - skinned).norm(dim=-1).max() > 0.02
+
+
+def test_the_waistband_follows_the_pelvis_not_the_thighs(anny_body):
+    rest = anny_body.rest_vertices(anny_body.default_shape())
+    indices, weights = anny_body.skinning()
+    garment = procedural_skirt(SkirtSpec(), rest.numpy(), anny_body.joint_names,
+                               indices.numpy(), weights.numpy())
+    names = anny_body.joint_names
+    used = {names[j] for j, w in zip(garment.skin_indices[garment.pinned].ravel(),
+                                     garment.skin_weights[garment.pinned].ravel()) if w > 0}
+    assert used <= {'Hips', 'LowerBack', 'Spine'}
+    assert np.allclose(garment.skin_weights[garment.pinned].sum(1), 1.0)
+    free = np.setdiff1d(np.arange(garment.mesh.num_vertices), garment.pinned)
+    legs = {names[j] for j in garment.skin_indices[free].ravel()}
+    assert any('Leg' in n for n in legs)  # the rest of the skirt keeps the body's weights

@@ -32,7 +32,8 @@ SPLITS = ("train", "val", "test")
 
 @dataclass(frozen=True)
 class MotionSpec:
-    """A procedural motion with its augmentation."""
+    """A motion source (procedural family, shipped clip or .bvh path; see
+    :func:`~swingar_pyg.world.motion_library.make_motion`) with its augmentation."""
 
     kind: str
     speed: float = 1.0
@@ -121,7 +122,7 @@ def _run_job(job: Job, fps: float, seconds: float, solver: XPBDSettings, part: s
 
     from swingar_pyg.world.body import AnnyBody
     from swingar_pyg.world.garment import procedural_skirt
-    from swingar_pyg.world.motion import procedural_motion
+    from swingar_pyg.world.motion_library import make_motion
     from swingar_pyg.world.sequence import simulate_sequence
 
     torch.set_num_threads(1)
@@ -131,9 +132,9 @@ def _run_job(job: Job, fps: float, seconds: float, solver: XPBDSettings, part: s
     garment = procedural_skirt(job.garment, body.rest_vertices(shape).numpy(), body.joint_names,
                                indices.numpy(), weights.numpy())
     garment = dataclasses.replace(garment, name=f"{garment.name}@shape{job.shape_index}")
-    motion = procedural_motion(job.motion.kind, body.joint_names, seconds=seconds, fps=fps,
-                               amplitude=job.motion.amplitude, speed=job.motion.speed,
-                               mirror=job.motion.mirror)
+    motion = make_motion(job.motion.kind, body, shape, seconds=seconds, fps=fps,
+                         speed=job.motion.speed, amplitude=job.motion.amplitude,
+                         mirror=job.motion.mirror)
     sequence = simulate_sequence(body, shape, garment, motion, solver)
     write_sequences(part, [sequence], ids=[job.id])
     result = sequence.result

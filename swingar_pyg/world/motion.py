@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
 import torch
 from torch import Tensor
 
@@ -114,11 +115,36 @@ def procedural_motion(kind: str, joint_names: tuple[str, ...], seconds: float = 
         angles[:, 0, 2] = a * math.radians(6) * stride
         translation[:, 1] = -torch.cumsum(a * 1.1 * speed * torch.ones(frames), 0) / fps
         translation[:, 2] = a * 0.02 * torch.cos(2 * phase)
-    if mirror:  # reflect in the x = 0 plane: swap sides, flip rotations about y and z
-        swap = [joint_names.index(_other_side(n)) if _other_side(n) in joint_names else k
-                for k, n in enumerate(joint_names)]
-        angles = angles[:, swap]
-        angles[..., 1:] = -angles[..., 1:]
-        translation[:, 0] = -translation[:, 0]
-    name = f"{kind}-a{amplitude:.2f}-s{speed:.2f}" + ("-mirror" if mirror else "")
-    return Motion(name, axis_angle_to_matrix(angles), translation, fps, tuple(joint_names))
+    motion = Motion(f"{kind}-a{amplitude:.2f}-s{speed:.2f}", axis_angle_to_matrix(angles),
+                    translation, fps, tuple(joint_names))
+    return mirror_motion(motion) if mirror else motion
+
+
+def ease_from_rest(motion: Motion, seconds: float = 0.5) -> Motion:
+    """Prepends ``seconds`` in which the body moves smoothly (slerp per joint,
+    smoothstep timing) from its rest pose into the motion's first frame, so that a
+    garment fitted in the rest pose starts in equilibrium instead of being jolted."""
+    from scipy.spatial.transform import Rotation, Slerp
+
+    frames = max(1, round(seconds * motion.fps))
+    weights = _ease_in(torch.arange(frames, dtype=torch.float32), float(frames)).numpy()
+    first = motion.rotations[0].double().numpy()
+    blend = torch.empty(frames, *first.shape, dtype=motion.rotations.dtype)
+    for j in range(first.shape[0]):
+        slerp = Slerp([0.0, 1.0], Rotation.from_matrix(np.stack([np.eye(3), first[j]])))
+        blend[:, j] = torch.as_tensor(slerp(weights).as_matrix())
+    path = torch.as_tensor(weights, dtype=motion.translation.dtype)[:, None] * motion.translation[0]
+    return Motion(motion.name, torch.cat([blend, motion.rotations]),
+                  torch.cat([path, motion.translation]), motion.fps, motion.joint_names)
+
+
+def mirror_motion(motion: Motion) -> Motion:
+    """The motion reflected in the body's ``x = 0`` plane: left and right swap,
+    rotations are conjugated by the reflection, the path's x flips."""
+    names = motion.joint_names
+    swap = [names.index(_other_side(n)) if _other_side(n) in names else k
+            for k, n in enumerate(names)]
+    reflect = torch.diag(torch.tensor([-1.0, 1.0, 1.0]))
+    rotations = reflect @ motion.rotations[:, swap] @ reflect
+    translation = motion.translation * torch.tensor([-1.0, 1.0, 1.0])
+    return Motion(motion.name + "-mirror", rotations, translation, motion.fps, names)
