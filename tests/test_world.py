@@ -54,8 +54,10 @@ def test_motion_errors():
 
 
 @pytest.mark.parametrize('spec', [SkirtSpec(), SkirtSpec(length=0.9, flare=0.0, vertices=800),
-                                  SkirtSpec(length=0.3, flare=0.7, vertices=400, jitter=0.3)],
-                         ids=['a-line', 'straight-long', 'circle-mini-irregular'])
+                                  SkirtSpec(length=0.3, flare=0.7, vertices=400, jitter=0.3),
+                                  SkirtSpec(vertices=6000)],
+                         ids=['a-line', 'straight-long', 'circle-mini-irregular',
+                              'finer-than-the-body'])
 def test_skirt_fits_outside_the_body(spec):
     body, indices, weights = cylinder_body()
     garment = procedural_skirt(spec, body, ('Hips',), indices, weights)
@@ -151,6 +153,21 @@ def test_skirt_swings_on_a_walking_body_without_stretch_or_penetration(anny_body
     assert np.nanmax(result.penetration) == 0
     # The hem lags and swings (rigid skinning would carry it along).
     assert (result.positions - skinned).norm(dim=-1).max() > 0.02
+
+
+@pytest.mark.parametrize('vertices', [600, 4000])
+def test_skirts_of_any_resolution_start_outside_the_body(anny_body, vertices):
+    import trimesh
+
+    rest = anny_body.rest_vertices(anny_body.default_shape()).numpy()
+    indices, weights = anny_body.skinning()
+    garment = procedural_skirt(SkirtSpec(vertices=vertices), rest, anny_body.joint_names,
+                               indices.numpy(), weights.numpy())
+    body = trimesh.Trimesh(rest, anny_body.faces.numpy(), process=False)
+    # Inside: behind the face nearest to the point (exact closest point on the mesh).
+    closest, _, face = trimesh.proximity.closest_point(body, garment.mesh.vertices)
+    side = ((garment.mesh.vertices - closest) * body.face_normals[face]).sum(axis=1)
+    assert (side > 0).all()
 
 
 def test_the_waistband_follows_the_pelvis_not_the_thighs(anny_body):

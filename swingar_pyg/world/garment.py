@@ -19,6 +19,7 @@ _ARM_BONE_WORDS = ("Shoulder", "Arm", "Hand", "Thumb", "Finger")
 # A waistband rides on the pelvis: its pins follow these joints only, or the thighs
 # would drag it out of shape in a stride (measured: 37 % waist strain running).
 _WAIST_JOINTS = ("Hips", "LowerBack", "Spine")
+_ENVELOPE_BINS = 72
 
 
 @dataclass(frozen=True)
@@ -123,7 +124,12 @@ def procedural_skirt(spec: SkirtSpec, body_vertices: np.ndarray, joint_names: tu
     rings = max(3, round(spec.vertices / segments))
     angles = -math.pi + 2 * math.pi * np.arange(segments) / segments
     heights = spec.waist_height - spec.length * np.linspace(0.0, 1.0, rings)
-    envelope = body_envelope(body_vertices, keep, heights, angles) + spec.clearance
+    # The envelope is measured on a fixed 5-degree grid and interpolated to the
+    # garment's segments: bins as fine as a dense garment's would miss body vertices.
+    grid = -math.pi + 2 * math.pi * np.arange(_ENVELOPE_BINS) / _ENVELOPE_BINS
+    coarse = body_envelope(body_vertices, keep, heights, grid)
+    envelope = np.stack([np.interp(angles, grid, row, period=2 * math.pi) for row in coarse])
+    envelope += spec.clearance
     waist = envelope[0]
     drop = spec.waist_height - heights
     flared = waist[None, :] + drop[:, None] * math.tan(math.asin(spec.flare))
