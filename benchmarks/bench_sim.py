@@ -83,7 +83,8 @@ def main() -> None:
     motion = procedural_motion(args.motion, body.joint_names, seconds=args.seconds)
     rows = []
     for count in args.vertices:
-        garment = procedural_skirt(SkirtSpec(vertices=count), rest, body.joint_names,
+        garment = procedural_skirt(SkirtSpec(vertices=count), rest, body.faces.numpy(),
+                                   body.joint_names,
                                    indices.numpy(), weights.numpy())
         runs, reference = [], None
         for substeps, iterations in [REFERENCE] + SETTINGS:

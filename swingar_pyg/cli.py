@@ -36,7 +36,8 @@ def _simulate(args: argparse.Namespace) -> int:
     indices, weights = body.skinning()
     spec = SkirtSpec(length=args.length, flare=args.flare, vertices=args.vertices,
                      jitter=args.jitter)
-    garment = procedural_skirt(spec, body.rest_vertices(shape).numpy(), body.joint_names,
+    garment = procedural_skirt(spec, body.rest_vertices(shape).numpy(), body.faces.numpy(),
+                               body.joint_names,
                                indices.numpy(), weights.numpy())
     motion = make_motion(args.motion, body, shape, seconds=args.seconds, fps=args.fps,
                          speed=args.speed, amplitude=args.amplitude, mirror=args.mirror)

@@ -17,6 +17,8 @@ def test_simulate_writes_a_sequence_file_and_a_preview(tmp_path, capsys):
         frames = len(sequence['rotations'])
         assert frames == 12
         assert sequence['garment_vertices'].shape == (frames, len(garment['rest_vertices']), 3)
+        assert garment['fit'].shape == (len(garment['rest_vertices']),)
+        assert (garment['fit'][:] > 0).all()  # fitted outside the body
         assert np.isfinite(sequence['garment_vertices'][:]).all()
         assert sequence.attrs['fps'] == 30.0
     assert (out / 'preview.gif').stat().st_size > 0

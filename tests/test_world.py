@@ -15,12 +15,17 @@ CMU_JOINTS = ('Hips', 'LHipJoint', 'LeftUpLeg', 'LeftLeg', 'LeftFoot', 'LowerBac
 
 
 def cylinder_body(radius=0.15, bottom=-0.9, top=0.6, rings=40, segments=48):
-    """Points on a vertical cylinder: a stand-in body for fitting tests."""
+    """An open vertical tube (outward-facing triangles): a stand-in body for fitting."""
     theta = np.linspace(-math.pi, math.pi, segments, endpoint=False)
     z = np.linspace(bottom, top, rings)
     t, zz = np.meshgrid(theta, z)
     points = np.stack([radius * np.cos(t), radius * np.sin(t), zz], axis=-1).reshape(-1, 3)
-    return points, np.zeros((len(points), 1), dtype=np.int64), np.ones((len(points), 1))
+    index = np.arange(rings * segments).reshape(rings, segments)
+    a, b = index[:-1], np.roll(index[:-1], -1, axis=1)
+    c, d = np.roll(index[1:], -1, axis=1), index[1:]
+    faces = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3),
+                            np.stack([a, c, d], -1).reshape(-1, 3)])
+    return points, faces, np.zeros((len(points), 1), dtype=np.int64), np.ones((len(points), 1))
 
 
 @pytest.mark.parametrize('kind', PROCEDURAL_MOTIONS)
@@ -59,8 +64,8 @@ def test_motion_errors():
                          ids=['a-line', 'straight-long', 'circle-mini-irregular',
                               'finer-than-the-body'])
 def test_skirt_fits_outside_the_body(spec):
-    body, indices, weights = cylinder_body()
-    garment = procedural_skirt(spec, body, ('Hips',), indices, weights)
+    body, faces, indices, weights = cylinder_body()
+    garment = procedural_skirt(spec, body, faces, ('Hips',), indices, weights)
     v = garment.mesh.vertices
     radial = np.linalg.norm(v[:, :2], axis=1)
     assert radial.min() >= 0.15 + spec.clearance - 1e-9
@@ -70,15 +75,31 @@ def test_skirt_fits_outside_the_body(spec):
     normals = vertex_normals(torch.from_numpy(v), torch.from_numpy(garment.mesh.faces)).numpy()
     assert (np.sum(normals[:, :2] * v[:, :2], axis=1) > 0).mean() > 0.99  # outward
     assert garment.skin_indices.shape == (len(v), 1)
+    # The fit attribute is the signed distance to the tube: radius - 0.15 here.
+    assert np.allclose(garment.fit, radial - 0.15, atol=2e-3)
 
 
 def test_irregular_skirt_has_a_different_topology():
-    body, indices, weights = cylinder_body()
-    grid = procedural_skirt(SkirtSpec(vertices=600), body, ('Hips',), indices, weights)
-    irregular = procedural_skirt(SkirtSpec(vertices=600, jitter=0.3), body, ('Hips',), indices,
-                                 weights)
+    body, faces, indices, weights = cylinder_body()
+    grid = procedural_skirt(SkirtSpec(vertices=600), body, faces, ('Hips',), indices, weights)
+    irregular = procedural_skirt(SkirtSpec(vertices=600, jitter=0.3), body, faces, ('Hips',),
+                                 indices, weights)
     degree = [np.bincount(g.mesh.faces.ravel()) for g in (grid, irregular)]
     assert len(np.unique(degree[1])) > len(np.unique(degree[0]))
+
+
+def test_signed_distance_to_surface_matches_a_sphere():
+    import trimesh
+
+    from swingar_pyg.world.garment import signed_distance_to_surface
+
+    sphere = trimesh.creation.icosphere(subdivisions=4, radius=0.2)
+    points = np.random.default_rng(0).normal(size=(200, 3))
+    points *= np.random.default_rng(1).uniform(0.02, 0.4, size=(200, 1)) / np.linalg.norm(
+        points, axis=1, keepdims=True)
+    distance = signed_distance_to_surface(points, sphere.vertices, sphere.faces)
+    # The faceted sphere lies within 0.5 mm inside the analytic one.
+    assert np.allclose(distance, np.linalg.norm(points, axis=1) - 0.2, atol=6e-4)
 
 
 @pytest.mark.parametrize('kwargs, message', [({'length': 3.0}, 'length'),
@@ -135,7 +156,8 @@ def test_skirt_swings_on_a_walking_body_without_stretch_or_penetration(anny_body
     shape = anny_body.default_shape()
     rest = anny_body.rest_vertices(shape)
     indices, weights = anny_body.skinning()
-    garment = procedural_skirt(SkirtSpec(vertices=800), rest.numpy(), anny_body.joint_names,
+    garment = procedural_skirt(SkirtSpec(vertices=800), rest.numpy(), anny_body.faces.numpy(),
+                               anny_body.joint_names,
                                indices.numpy(), weights.numpy())
     # Walking swings the thighs into the skirt: the case that once pushed cloth
     # through a leg (contacts paired against the body's end-of-frame pose).
@@ -161,7 +183,8 @@ def test_skirts_of_any_resolution_start_outside_the_body(anny_body, vertices):
 
     rest = anny_body.rest_vertices(anny_body.default_shape()).numpy()
     indices, weights = anny_body.skinning()
-    garment = procedural_skirt(SkirtSpec(vertices=vertices), rest, anny_body.joint_names,
+    garment = procedural_skirt(SkirtSpec(vertices=vertices), rest, anny_body.faces.numpy(),
+                               anny_body.joint_names,
                                indices.numpy(), weights.numpy())
     body = trimesh.Trimesh(rest, anny_body.faces.numpy(), process=False)
     # Inside: behind the face nearest to the point (exact closest point on the mesh).
@@ -173,7 +196,8 @@ def test_skirts_of_any_resolution_start_outside_the_body(anny_body, vertices):
 def test_the_waistband_follows_the_pelvis_not_the_thighs(anny_body):
     rest = anny_body.rest_vertices(anny_body.default_shape())
     indices, weights = anny_body.skinning()
-    garment = procedural_skirt(SkirtSpec(), rest.numpy(), anny_body.joint_names,
+    garment = procedural_skirt(SkirtSpec(), rest.numpy(), anny_body.faces.numpy(),
+                               anny_body.joint_names,
                                indices.numpy(), weights.numpy())
     names = anny_body.joint_names
     used = {names[j] for j, w in zip(garment.skin_indices[garment.pinned].ravel(),

@@ -129,7 +129,8 @@ def _run_job(job: Job, fps: float, seconds: float, solver: XPBDSettings, part: s
     body = AnnyBody()
     shape = torch.tensor(job.shape)
     indices, weights = body.skinning()
-    garment = procedural_skirt(job.garment, body.rest_vertices(shape).numpy(), body.joint_names,
+    garment = procedural_skirt(job.garment, body.rest_vertices(shape).numpy(),
+                               body.faces.numpy(), body.joint_names,
                                indices.numpy(), weights.numpy())
     garment = dataclasses.replace(garment, name=f"{garment.name}@shape{job.shape_index}")
     motion = make_motion(job.motion.kind, body, shape, seconds=seconds, fps=fps,

@@ -33,6 +33,8 @@ class Garment:
         skin_indices, skin_weights: ``(N, K)`` body joints each vertex follows in
             rigid skinning: those of the nearest body vertex, but for the pinned
             waistband, which follows the pelvis and spine only.
+        fit: ``(N,)`` the fit attribute: signed distance (m) from the body surface in
+            the rest pose, positive outside (see :func:`signed_distance_to_surface`).
     """
 
     name: str
@@ -40,6 +42,7 @@ class Garment:
     pinned: np.ndarray
     skin_indices: np.ndarray
     skin_weights: np.ndarray
+    fit: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -80,6 +83,18 @@ class SkirtSpec:
         return f"skirt-l{self.length:.2f}-f{self.flare:.2f}-n{self.vertices}-{kind}"
 
 
+def signed_distance_to_surface(points: np.ndarray, vertices: np.ndarray,
+                               faces: np.ndarray) -> np.ndarray:
+    """Exact distance from each point to the closest point of a triangle mesh, negative
+    behind the face it lies on (inside a closed, outward-facing surface)."""
+    import trimesh
+
+    surface = trimesh.Trimesh(vertices, faces, process=False)
+    closest, distance, face = trimesh.proximity.closest_point(surface, points)
+    side = np.einsum("ij,ij->i", points - closest, surface.face_normals[face])
+    return np.where(side < 0, -distance, distance)
+
+
 def body_envelope(vertices: np.ndarray, keep: np.ndarray, heights: np.ndarray,
                   angles: np.ndarray, band: float = 0.03) -> np.ndarray:
     """Largest horizontal distance of the kept body vertices from the vertical
@@ -107,9 +122,10 @@ def body_envelope(vertices: np.ndarray, keep: np.ndarray, heights: np.ndarray,
     return envelope
 
 
-def procedural_skirt(spec: SkirtSpec, body_vertices: np.ndarray, joint_names: tuple[str, ...],
-                     skin_indices: np.ndarray, skin_weights: np.ndarray) -> Garment:
-    """Fits ``spec`` around a body in its rest pose.
+def procedural_skirt(spec: SkirtSpec, body_vertices: np.ndarray, body_faces: np.ndarray,
+                     joint_names: tuple[str, ...], skin_indices: np.ndarray,
+                     skin_weights: np.ndarray) -> Garment:
+    """Fits ``spec`` around a body (rest-pose ``body_vertices`` and ``body_faces``).
 
     Rings run from the waist (pinned) to the hem; at each ring and angle the radius
     is the larger of the flared profile and the body's envelope plus clearance.
@@ -176,7 +192,8 @@ def procedural_skirt(spec: SkirtSpec, body_vertices: np.ndarray, joint_names: tu
     fallback[:, 0] = 1.0
     indices[pinned[total[:, 0] == 0], 0] = waist[0]
     weights[pinned] = np.where(total > 0, waist_weights / np.where(total > 0, total, 1.0), fallback)
-    return Garment(spec.name, mesh, pinned, indices, weights)
+    fit = signed_distance_to_surface(mesh.vertices, body_vertices, body_faces)
+    return Garment(spec.name, mesh, pinned, indices, weights, fit)
 
 
 def _interpolate_rings(radius: np.ndarray, ring_position: np.ndarray,

@@ -3,7 +3,7 @@
 Layout::
 
     /garments/<name>/ rest_vertices (N,3) faces (F,3) pinned (P,) skin_indices (N,K)
-                      skin_weights (N,K)
+                      skin_weights (N,K) fit (N,) [signed distance to the rest body]
     /sequences/<id>/  garment_vertices (T,N,3) [chunked by frame, gzip]
                       rigid_vertices (T,N,3) rotations (T,J,3,3) translation (T,3)
                       body_shape (S,) seconds_per_frame max_stretch mean_stretch
@@ -47,6 +47,7 @@ def write_sequences(path: str | Path, sequences: list[SimulatedSequence],
                     group["pinned"] = garment.pinned.astype(np.int32)
                     group["skin_indices"] = garment.skin_indices.astype(np.int16)
                     group["skin_weights"] = garment.skin_weights.astype(np.float32)
+                    group["fit"] = garment.fit.astype(np.float32)
                 group = file.create_group(f"sequences/{sequence_id}")
                 result = sequence.result
                 frames, vertices = result.positions.shape[:2]
