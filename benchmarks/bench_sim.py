@@ -42,9 +42,12 @@ def plot(rows: list[dict]):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from matplotlib.ticker import NullFormatter
+
     figure, (error_axis, strain_axis) = plt.subplots(1, 2, figsize=(11, 4))
     for row in rows:
-        runs = [r for r in row["runs"] if not r["reference"]]
+        runs = sorted((r for r in row["runs"] if not r["reference"]),
+                      key=lambda r: r["ms_per_frame"])
         times = [r["ms_per_frame"] for r in runs]
         error_axis.plot(times, [r["mean_error_mm"] for r in runs], "o-",
                         label=f"{row['vertices']} vertices")
@@ -59,6 +62,7 @@ def plot(rows: list[dict]):
     strain_axis.set(xscale="log", xlabel="ms per frame", ylabel="largest edge strain (%)",
                     title="largest edge strain")
     for axis in (error_axis, strain_axis):
+        axis.xaxis.set_minor_formatter(NullFormatter())
         axis.grid(alpha=0.3, which="both")
         axis.legend(fontsize=7)
     figure.tight_layout()
@@ -71,7 +75,17 @@ def main() -> None:
     parser.add_argument("--motion", default="walk")
     parser.add_argument("--seconds", type=float, default=2.0)
     parser.add_argument("--quick", action="store_true", help="300 vertices, 0.5 s")
+    parser.add_argument("--replot", action="store_true",
+                        help="redraw the PNG from the last results/bench_sim.json")
     args = parser.parse_args()
+    if args.replot:
+        import json
+
+        from common import RESULTS
+
+        payload = json.loads((RESULTS / "bench_sim.json").read_text())
+        write_results("bench_sim", payload, plot(payload["rows"]))
+        return
     if args.quick:
         args.vertices, args.seconds = [300], 0.5
     torch.set_num_threads(1)
