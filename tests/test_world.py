@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import torch
 
-from swingar_pyg.geometry import vertex_normals
+from swingar_pyg.geometry import signed_distance_to_surface, split_quads, vertex_normals
 from swingar_pyg.geometry.skinning import linear_blend_skinning
 from swingar_pyg.world.garment import SkirtSpec, procedural_skirt
 from swingar_pyg.world.motion import PROCEDURAL_MOTIONS, procedural_motion
@@ -21,10 +21,9 @@ def cylinder_body(radius=0.15, bottom=-0.9, top=0.6, rings=40, segments=48):
     t, zz = np.meshgrid(theta, z)
     points = np.stack([radius * np.cos(t), radius * np.sin(t), zz], axis=-1).reshape(-1, 3)
     index = np.arange(rings * segments).reshape(rings, segments)
-    a, b = index[:-1], np.roll(index[:-1], -1, axis=1)
-    c, d = np.roll(index[1:], -1, axis=1), index[1:]
-    faces = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3),
-                            np.stack([a, c, d], -1).reshape(-1, 3)])
+    corners = (index[:-1], np.roll(index[:-1], -1, axis=1), np.roll(index[1:], -1, axis=1),
+               index[1:])
+    faces = split_quads(*corners, np.zeros(corners[0].shape, dtype=bool))
     return points, faces, np.zeros((len(points), 1), dtype=np.int64), np.ones((len(points), 1))
 
 
@@ -90,8 +89,6 @@ def test_irregular_skirt_has_a_different_topology():
 
 def test_signed_distance_to_surface_matches_a_sphere():
     import trimesh
-
-    from swingar_pyg.world.garment import signed_distance_to_surface
 
     sphere = trimesh.creation.icosphere(subdivisions=4, radius=0.2)
     points = np.random.default_rng(0).normal(size=(200, 3))

@@ -11,7 +11,7 @@ from swingar_pyg.sim.constraints import bending_pairs, distance_constraints, str
 def hanging_sheet(rows=8, cols=8, size=0.4):
     """A sheet in the x-z plane, top row pinned (a curtain)."""
     flat = sheet(rows, cols, width=size, height=size, jitter=0.2)
-    vertices = flat.vertices[:, [0, 2, 1]] * [1, 1, 1]  # y -> z: hangs vertically
+    vertices = flat.vertices[:, [0, 2, 1]]  # y -> z: hangs vertically
     mesh = as_mesh(vertices, flat.faces)
     top = np.flatnonzero(np.isclose(vertices[:, 2], vertices[:, 2].max()))
     return mesh, top

@@ -1,5 +1,6 @@
 """Mesh geometry on numpy/scipy (preprocessing) and torch (batched, differentiable)."""
 
+from swingar_pyg.geometry.distance import signed_distance_to_surface
 from swingar_pyg.geometry.geodesic import (
     edge_length_graph,
     farthest_point_sampling,
@@ -7,7 +8,7 @@ from swingar_pyg.geometry.geodesic import (
 )
 from swingar_pyg.geometry.mesh import Mesh, as_mesh, load_mesh, mesh_edge_index, mesh_edges
 from swingar_pyg.geometry.normals import vertex_normals
-from swingar_pyg.geometry.primitives import roll_into_cylinder, sheet
+from swingar_pyg.geometry.primitives import roll_into_cylinder, sheet, split_quads
 from swingar_pyg.geometry.spectral import (
     SpectralDescriptor,
     exact_affinity_spectrum,
@@ -29,6 +30,8 @@ __all__ = [
     "mesh_edges",
     "roll_into_cylinder",
     "sheet",
+    "signed_distance_to_surface",
+    "split_quads",
     "spectral_descriptor",
     "vertex_normals",
 ]

@@ -25,9 +25,8 @@ def sheet(rows: int, cols: int, width: float = 1.0, height: float = 1.0,
     u, v = np.meshgrid(np.linspace(0.0, width, cols), np.linspace(0.0, height, rows))
     vertices = np.stack([u.ravel(), v.ravel(), np.zeros(u.size)], axis=1)
     index = np.arange(rows * cols).reshape(rows, cols)
-    a, b = index[:-1, :-1].ravel(), index[:-1, 1:].ravel()
-    c, d = index[1:, 1:].ravel(), index[1:, :-1].ravel()
-    flip = np.zeros(a.size, dtype=bool)
+    corners = (index[:-1, :-1], index[:-1, 1:], index[1:, 1:], index[1:, :-1])
+    flip = np.zeros(corners[0].shape, dtype=bool)
     if jitter > 0:
         rng = np.random.default_rng(seed)
         interior = np.zeros((rows, cols), dtype=bool)
@@ -35,10 +34,19 @@ def sheet(rows: int, cols: int, width: float = 1.0, height: float = 1.0,
         cell = np.array([width / (cols - 1), height / (rows - 1)])
         offsets = rng.uniform(-jitter, jitter, size=(interior.sum(), 2)) * cell
         vertices[interior.ravel(), :2] += offsets
-        flip = rng.random(a.size) < 0.5
+        flip = rng.random(flip.shape) < 0.5
+    return as_mesh(vertices, split_quads(*corners, flip))
+
+
+def split_quads(a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray,
+                flip: np.ndarray) -> np.ndarray:
+    """Two triangles per quad ``(a, b, c, d)`` (corner index arrays of one shape, in
+    order around the quad): split along ``a-c``, or along ``b-d`` where ``flip``.
+    Returns ``(2 * quads, 3)`` faces keeping the quads' orientation."""
+    a, b, c, d, flip = (np.ravel(x) for x in (a, b, c, d, flip))
     first = np.where(flip[:, None], np.stack([a, b, d], 1), np.stack([a, b, c], 1))
     second = np.where(flip[:, None], np.stack([b, c, d], 1), np.stack([a, c, d], 1))
-    return as_mesh(vertices, np.concatenate([first, second]))
+    return np.concatenate([first, second])
 
 
 def roll_into_cylinder(mesh: Mesh, radius: float) -> Mesh:

@@ -11,7 +11,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from swingar_pyg.geometry.distance import signed_distance_to_surface
 from swingar_pyg.geometry.mesh import Mesh, as_mesh
+from swingar_pyg.geometry.primitives import split_quads
 
 # Bones whose vertices do not bound a skirt: in the rest A-pose the hands hang beside
 # the hips, but a skirt goes around the pelvis and legs, not around the arms.
@@ -34,7 +36,8 @@ class Garment:
             rigid skinning: those of the nearest body vertex, but for the pinned
             waistband, which follows the pelvis and spine only.
         fit: ``(N,)`` the fit attribute: signed distance (m) from the body surface in
-            the rest pose, positive outside (see :func:`signed_distance_to_surface`).
+            the rest pose, positive outside
+            (:func:`~swingar_pyg.geometry.distance.signed_distance_to_surface`).
     """
 
     name: str
@@ -81,18 +84,6 @@ class SkirtSpec:
     def name(self) -> str:
         kind = "irregular" if self.jitter > 0 else "grid"
         return f"skirt-l{self.length:.2f}-f{self.flare:.2f}-n{self.vertices}-{kind}"
-
-
-def signed_distance_to_surface(points: np.ndarray, vertices: np.ndarray,
-                               faces: np.ndarray) -> np.ndarray:
-    """Exact distance from each point to the closest point of a triangle mesh, negative
-    behind the face it lies on (inside a closed, outward-facing surface)."""
-    import trimesh
-
-    surface = trimesh.Trimesh(vertices, faces, process=False)
-    closest, distance, face = trimesh.proximity.closest_point(surface, points)
-    side = np.einsum("ij,ij->i", points - closest, surface.face_normals[face])
-    return np.where(side < 0, -distance, distance)
 
 
 def body_envelope(vertices: np.ndarray, keep: np.ndarray, heights: np.ndarray,
@@ -169,17 +160,14 @@ def procedural_skirt(spec: SkirtSpec, body_vertices: np.ndarray, body_faces: np.
                          centre[1] + radius_at * np.sin(theta), z], axis=-1).reshape(-1, 3)
 
     index = np.arange(rings * segments).reshape(rings, segments)
-    a, b = index[:-1], np.roll(index[:-1], -1, axis=1)
-    c, d = np.roll(index[1:], -1, axis=1), index[1:]
-    flip = np.zeros(a.shape, dtype=bool)
+    corners = (index[:-1], np.roll(index[:-1], -1, axis=1), np.roll(index[1:], -1, axis=1),
+               index[1:])
+    flip = np.zeros(corners[0].shape, dtype=bool)
     if spec.jitter > 0:
-        flip = np.random.default_rng(spec.seed + 1).random(a.shape) < 0.5
-    first = np.where(flip[..., None], np.stack([a, b, d], -1), np.stack([a, b, c], -1))
-    second = np.where(flip[..., None], np.stack([b, c, d], -1), np.stack([a, c, d], -1))
-    faces = np.concatenate([first.reshape(-1, 3), second.reshape(-1, 3)])
+        flip = np.random.default_rng(spec.seed + 1).random(flip.shape) < 0.5
     # Outward normals: the ring order runs counter-clockwise seen from above and
-    # rows run downwards, so (a, b, c) faces inward; flip to face outward.
-    mesh = as_mesh(vertices, faces[:, ::-1])
+    # rows run downwards, so (a, b, c) faces inward; reverse to face outward.
+    mesh = as_mesh(vertices, split_quads(*corners, flip)[:, ::-1])
 
     nearest = cKDTree(body_vertices).query(vertices)[1]
     indices, weights = skin_indices[nearest].copy(), skin_weights[nearest].copy()
