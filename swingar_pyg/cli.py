@@ -34,11 +34,15 @@ def _simulate(args: argparse.Namespace) -> int:
     body = AnnyBody()
     shape = torch.tensor(args.body_shape) if args.body_shape else body.default_shape()
     indices, weights = body.skinning()
-    spec = SkirtSpec(length=args.length, flare=args.flare, vertices=args.vertices,
-                     jitter=args.jitter)
-    garment = procedural_skirt(spec, body.rest_vertices(shape).numpy(), body.faces.numpy(),
-                               body.joint_names,
-                               indices.numpy(), weights.numpy())
+    if args.garment:
+        from swingar_pyg.world.garment_assets import fit_shipped_garment
+
+        garment = fit_shipped_garment(args.garment, body, shape)
+    else:
+        spec = SkirtSpec(length=args.length, flare=args.flare, vertices=args.vertices,
+                         jitter=args.jitter)
+        garment = procedural_skirt(spec, body.rest_vertices(shape).numpy(), body.faces.numpy(),
+                                   body.joint_names, indices.numpy(), weights.numpy())
     motion = make_motion(args.motion, body, shape, seconds=args.seconds, fps=args.fps,
                          speed=args.speed, amplitude=args.amplitude, mirror=args.mirror)
     settings = XPBDSettings(fps=args.fps, substeps=args.substeps, iterations=args.iterations)
@@ -114,6 +118,10 @@ def build_parser() -> argparse.ArgumentParser:
     simulate.add_argument("--amplitude", type=float, default=1.0)
     simulate.add_argument("--speed", type=float, default=1.0)
     simulate.add_argument("--mirror", action="store_true")
+    simulate.add_argument("--garment", default=None, metavar="NAME",
+                          help="a shipped MakeHuman piece (e.g. dress_skirt_knee, tshirt_loose, "
+                               "overall_jumpsuit) fitted to the body; default: a procedural skirt "
+                               "from --length/--flare/--vertices/--jitter")
     simulate.add_argument("--length", type=float, default=0.55, help="skirt length, m")
     simulate.add_argument("--flare", type=float, default=0.35)
     simulate.add_argument("--vertices", type=int, default=1500)

