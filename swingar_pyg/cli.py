@@ -87,6 +87,28 @@ def _make_dataset(args: argparse.Namespace) -> int:
     return 0
 
 
+def _preview(args: argparse.Namespace) -> int:
+    import torch
+
+    from swingar_pyg.viz.preview import render_sequence
+    from swingar_pyg.world.body import AnnyBody
+    from swingar_pyg.world.sequence_file import read_sequence
+
+    sequence = read_sequence(args.file, args.sequence)
+    body = AnnyBody()
+    if sequence["joint_names"] != body.joint_names:
+        raise ValueError("the sequence was made for another rig than anny's cmu_mb")
+    posed = body.pose(torch.as_tensor(sequence["body_shape"]),
+                      torch.as_tensor(sequence["rotations"]),
+                      torch.as_tensor(sequence["translation"]))
+    garment = sequence["rigid_vertices"] if args.rigid else sequence["garment_vertices"]
+    path = render_sequence(args.out, posed.vertices.numpy(), body.faces.numpy(), garment,
+                           sequence["faces"], fps=sequence["fps"], every=args.every,
+                           title=f"{sequence['garment']} / {sequence['motion']}")
+    print(f"wrote {path}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="swingar",
@@ -144,6 +166,16 @@ def build_parser() -> argparse.ArgumentParser:
     dataset.add_argument("--shard", default="0/1",
                          help="i/n: this machine's share of the jobs (default: 0/1)")
     dataset.set_defaults(run=_make_dataset)
+
+    preview = commands.add_parser(
+        "preview", help="render a sequence of a dataset file to a GIF (or a PNG of frame 0)")
+    preview.add_argument("file", help="an HDF5 file, e.g. data/quickstart/train.h5")
+    preview.add_argument("sequence", help="a sequence id, e.g. train-00003")
+    preview.add_argument("--out", default="preview.gif", help=".gif, or .png for one frame")
+    preview.add_argument("--every", type=int, default=2, help="draw every n-th frame")
+    preview.add_argument("--rigid", action="store_true",
+                         help="show the rigidly skinned garment (the baseline) instead")
+    preview.set_defaults(run=_preview)
     return parser
 
 

@@ -30,3 +30,16 @@ def test_simulate_rejects_an_unknown_motion(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(['simulate', '--motion', 'moonwalk', '--out', str(tmp_path)])
     assert "unknown motion 'moonwalk'" in capsys.readouterr().err
+
+
+def test_preview_renders_a_stored_sequence(tmp_path, capsys):
+    pytest.importorskip('anny')
+    out = tmp_path / 'run'
+    assert main(['simulate', '--motion', 'sway', '--seconds', '0.2', '--vertices', '150',
+                 '--substeps', '5', '--out', str(out), '--no-preview']) == 0
+    assert main(['preview', str(out / 'sequence.h5'), '000000', '--out',
+                 str(tmp_path / 'p.png')]) == 0
+    assert (tmp_path / 'p.png').stat().st_size > 0
+    with pytest.raises(SystemExit):
+        main(['preview', str(out / 'sequence.h5'), 'nope', '--out', str(tmp_path / 'q.png')])
+    assert "has no sequence 'nope'" in capsys.readouterr().err

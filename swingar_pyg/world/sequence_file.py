@@ -86,3 +86,23 @@ def merge_sequence_files(parts: list[Path], path: str | Path) -> Path:
                             raise ValueError(f"sequence {name} is in more than one part")
                         source.copy(source[f"sequences/{name}"], merged, f"sequences/{name}")
     return path
+
+
+def read_sequence(path: str | Path, sequence_id: str) -> dict:
+    """One sequence of a file as arrays: ``garment_vertices``, ``rigid_vertices``,
+    ``rotations``, ``translation``, ``body_shape``, ``faces`` (the garment's), and
+    the attributes (``garment``, ``motion``, ``fps``, ``joint_names``)."""
+    import h5py
+
+    with h5py.File(path, "r") as file:
+        if sequence_id not in file.get("sequences", {}):
+            available = ", ".join(list(file.get("sequences", {}))[:8])
+            raise ValueError(f"{path} has no sequence {sequence_id!r} (it has {available}, ...)")
+        group = file[f"sequences/{sequence_id}"]
+        out = {name: group[name][:] for name in ("garment_vertices", "rigid_vertices",
+                                                 "rotations", "translation", "body_shape")}
+        out.update(garment=group.attrs["garment"], motion=group.attrs["motion"],
+                   fps=float(group.attrs["fps"]),
+                   joint_names=tuple(json.loads(group.attrs["joint_names"])),
+                   faces=file[f"garments/{group.attrs['garment']}/faces"][:])
+    return out
