@@ -42,6 +42,10 @@ class BodyCollider:
         _, index = cKDTree(body.detach().cpu().numpy()).query(points.detach().cpu().numpy())
         return torch.as_tensor(np.asarray(index), device=points.device)
 
+    def contact_motion(self, frame: int, index: Tensor) -> Tensor:
+        """How far each contact point moves from ``frame - 1`` to ``frame``."""
+        return self.vertices[frame, index] - self.vertices[max(frame - 1, 0), index]
+
     def planes(self, frame: int, index: Tensor, fraction: float) -> tuple[Tensor, Tensor]:
         """Contact points and unit normals at ``fraction`` of the way from
         ``frame - 1`` to ``frame``."""
@@ -53,5 +57,5 @@ class BodyCollider:
     def signed_distance(self, frame: int, points: Tensor) -> Tensor:
         """Distance of each point above the tangent plane of its nearest body
         vertex (negative: inside the body)."""
-        index = self.nearest(frame, points)
-        return ((points - self.vertices[frame, index]) * self.normals[frame, index]).sum(-1)
+        point, normal = self.planes(frame, self.nearest(frame, points), 1.0)
+        return ((points - point) * normal).sum(-1)

@@ -231,19 +231,18 @@ class XPBDCloth:
             iterator = tqdm(schedule, desc="simulating", unit="frame", leave=False)
         for step_index, frame in enumerate(iterator):
             start = time.perf_counter()
-            previous_target = targets[max(frame - 1, 0)] if step_index >= s.settle_frames else \
-                targets[0]
-            contact = body_step = moved = None
-            if collider is not None:
-                moved = collider.vertices[frame] - collider.vertices[max(frame - 1, 0)]
-                if step_index < s.settle_frames:
-                    moved = torch.zeros_like(moved)
+            settling = step_index < s.settle_frames
+            previous_target = targets[0] if settling else targets[max(frame - 1, 0)]
+            contact = body_step = None
             for sub in range(s.substeps):
                 fraction = (sub + 1) / s.substeps
                 if collider is not None and sub % contact_interval == 0:
-                    at = sub / s.substeps if step_index >= s.settle_frames else 1.0
+                    at = 1.0 if settling else sub / s.substeps
                     contact = collider.nearest(frame, x, at)
-                    body_step = moved[contact].to(self.device, self.dtype) / s.substeps
+                    body_step = collider.contact_motion(frame, contact).to(
+                        self.device, self.dtype) / s.substeps
+                    if settling:
+                        body_step = torch.zeros_like(body_step)
                 v = (v + dt * self.gravity) * decay
                 p = x + dt * v
                 p[self.pinned] = torch.lerp(previous_target, targets[frame], fraction)
@@ -253,13 +252,13 @@ class XPBDCloth:
                     self._solve(p, self.stretch, s.stretch_compliance, dt, stretch_lagrange)
                     self._solve(p, self.bend, s.bend_compliance, dt, bend_lagrange)
                     if collider is not None:
-                        body_fraction = fraction if step_index >= s.settle_frames else 1.0
+                        body_fraction = 1.0 if settling else fraction
                         self._collide(p, x, collider, frame, contact, body_fraction, body_step)
                 v = (p - x) / dt
                 x = p
             if not torch.isfinite(x).all():
                 raise FloatingPointError(f"cloth state became non-finite at frame {frame}")
-            if step_index < s.settle_frames:
+            if settling:
                 continue
             positions[frame] = x.cpu()
             seconds[frame] = time.perf_counter() - start
