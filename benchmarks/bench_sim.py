@@ -28,7 +28,7 @@ from common import machine_info, write_results  # noqa: E402
 
 from swingar_pyg.sim import XPBDSettings  # noqa: E402
 from swingar_pyg.world.body import AnnyBody  # noqa: E402
-from swingar_pyg.world.garment import SkirtSpec, procedural_skirt  # noqa: E402
+from swingar_pyg.world.garment import SkirtSpec, fit_procedural_skirt  # noqa: E402
 from swingar_pyg.world.motion import procedural_motion  # noqa: E402
 from swingar_pyg.world.sequence import simulate_sequence  # noqa: E402
 
@@ -92,14 +92,10 @@ def main() -> None:
 
     body = AnnyBody()
     shape = body.default_shape()
-    indices, weights = body.skinning()
-    rest = body.rest_vertices(shape).numpy()
     motion = procedural_motion(args.motion, body.joint_names, seconds=args.seconds)
     rows = []
     for count in args.vertices:
-        garment = procedural_skirt(SkirtSpec(vertices=count), rest, body.faces.numpy(),
-                                   body.joint_names,
-                                   indices.numpy(), weights.numpy())
+        garment = fit_procedural_skirt(SkirtSpec(vertices=count), body, shape)
         runs, reference = [], None
         for substeps, iterations in [REFERENCE] + SETTINGS:
             settings = XPBDSettings(fps=motion.fps, substeps=substeps, iterations=iterations)

@@ -25,7 +25,7 @@ def _simulate(args: argparse.Namespace) -> int:
     from swingar_pyg.sim import XPBDSettings
     from swingar_pyg.viz.preview import render_sequence
     from swingar_pyg.world.body import AnnyBody
-    from swingar_pyg.world.garment import SkirtSpec, procedural_skirt
+    from swingar_pyg.world.garment import SkirtSpec, fit_procedural_skirt
     from swingar_pyg.world.motion_library import make_motion
     from swingar_pyg.world.sequence import simulate_sequence
     from swingar_pyg.world.sequence_file import write_sequences
@@ -33,7 +33,6 @@ def _simulate(args: argparse.Namespace) -> int:
     torch.set_num_threads(1)
     body = AnnyBody()
     shape = torch.tensor(args.body_shape) if args.body_shape else body.default_shape()
-    indices, weights = body.skinning()
     if args.garment:
         from swingar_pyg.world.garment_assets import fit_shipped_garment
 
@@ -41,8 +40,7 @@ def _simulate(args: argparse.Namespace) -> int:
     else:
         spec = SkirtSpec(length=args.length, flare=args.flare, vertices=args.vertices,
                          jitter=args.jitter)
-        garment = procedural_skirt(spec, body.rest_vertices(shape).numpy(), body.faces.numpy(),
-                                   body.joint_names, indices.numpy(), weights.numpy())
+        garment = fit_procedural_skirt(spec, body, shape)
     motion = make_motion(args.motion, body, shape, seconds=args.seconds, fps=args.fps,
                          speed=args.speed, amplitude=args.amplitude, mirror=args.mirror)
     settings = XPBDSettings(fps=args.fps, substeps=args.substeps, iterations=args.iterations)

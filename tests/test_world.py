@@ -6,7 +6,7 @@ import torch
 
 from swingar_pyg.geometry import signed_distance_to_surface, split_quads, vertex_normals
 from swingar_pyg.geometry.skinning import linear_blend_skinning
-from swingar_pyg.world.garment import SkirtSpec, procedural_skirt
+from swingar_pyg.world.garment import SkirtSpec, fit_procedural_skirt, procedural_skirt
 from swingar_pyg.world.motion import PROCEDURAL_MOTIONS, procedural_motion
 
 CMU_JOINTS = ('Hips', 'LHipJoint', 'LeftUpLeg', 'LeftLeg', 'LeftFoot', 'LowerBack', 'Spine',
@@ -148,25 +148,16 @@ def test_anny_rejects_bad_input(anny_body):
 
 
 def test_skirt_swings_on_a_walking_body_without_stretch_or_penetration(anny_body):
-    from swingar_pyg.sim import BodyCollider, XPBDCloth, XPBDSettings
+    from swingar_pyg.sim import XPBDSettings
+    from swingar_pyg.world.sequence import simulate_sequence
 
     shape = anny_body.default_shape()
-    rest = anny_body.rest_vertices(shape)
-    indices, weights = anny_body.skinning()
-    garment = procedural_skirt(SkirtSpec(vertices=800), rest.numpy(), anny_body.faces.numpy(),
-                               anny_body.joint_names,
-                               indices.numpy(), weights.numpy())
+    garment = fit_procedural_skirt(SkirtSpec(vertices=800), anny_body, shape)
     # Walking swings the thighs into the skirt: the case that once pushed cloth
     # through a leg (contacts paired against the body's end-of-frame pose).
     motion = procedural_motion('walk', anny_body.joint_names, seconds=2.0)
-    posed = anny_body.pose(shape, motion.rotations, motion.translation)
-    skinned = linear_blend_skinning(torch.from_numpy(garment.mesh.vertices).float(),
-                                    torch.from_numpy(garment.skin_indices),
-                                    torch.from_numpy(garment.skin_weights).float(),
-                                    posed.joint_transforms)
-    cloth = XPBDCloth(garment.mesh, garment.pinned, XPBDSettings(settle_frames=5))
-    result = cloth.simulate(skinned[0], skinned[:, garment.pinned],
-                            BodyCollider(posed.vertices, anny_body.faces))
+    sequence = simulate_sequence(anny_body, shape, garment, motion, XPBDSettings(settle_frames=5))
+    result, skinned = sequence.result, sequence.rigid
     assert torch.isfinite(result.positions).all()
     assert result.max_stretch.max() < 0.12
     assert np.nanmax(result.penetration) == 0
@@ -178,11 +169,9 @@ def test_skirt_swings_on_a_walking_body_without_stretch_or_penetration(anny_body
 def test_skirts_of_any_resolution_start_outside_the_body(anny_body, vertices):
     import trimesh
 
-    rest = anny_body.rest_vertices(anny_body.default_shape()).numpy()
-    indices, weights = anny_body.skinning()
-    garment = procedural_skirt(SkirtSpec(vertices=vertices), rest, anny_body.faces.numpy(),
-                               anny_body.joint_names,
-                               indices.numpy(), weights.numpy())
+    shape = anny_body.default_shape()
+    rest = anny_body.rest_vertices(shape).numpy()
+    garment = fit_procedural_skirt(SkirtSpec(vertices=vertices), anny_body, shape)
     body = trimesh.Trimesh(rest, anny_body.faces.numpy(), process=False)
     # Inside: behind the face nearest to the point (exact closest point on the mesh).
     closest, _, face = trimesh.proximity.closest_point(body, garment.mesh.vertices)
@@ -191,11 +180,7 @@ def test_skirts_of_any_resolution_start_outside_the_body(anny_body, vertices):
 
 
 def test_the_waistband_follows_the_pelvis_not_the_thighs(anny_body):
-    rest = anny_body.rest_vertices(anny_body.default_shape())
-    indices, weights = anny_body.skinning()
-    garment = procedural_skirt(SkirtSpec(), rest.numpy(), anny_body.faces.numpy(),
-                               anny_body.joint_names,
-                               indices.numpy(), weights.numpy())
+    garment = fit_procedural_skirt(SkirtSpec(), anny_body, anny_body.default_shape())
     names = anny_body.joint_names
     used = {names[j] for j, w in zip(garment.skin_indices[garment.pinned].ravel(),
                                      garment.skin_weights[garment.pinned].ravel()) if w > 0}

@@ -121,17 +121,14 @@ def _run_job(job: Job, fps: float, seconds: float, solver: XPBDSettings, part: s
     import torch
 
     from swingar_pyg.world.body import AnnyBody
-    from swingar_pyg.world.garment import procedural_skirt
+    from swingar_pyg.world.garment import fit_procedural_skirt
     from swingar_pyg.world.motion_library import make_motion
     from swingar_pyg.world.sequence import simulate_sequence
 
     torch.set_num_threads(1)
     body = AnnyBody()
     shape = torch.tensor(job.shape)
-    indices, weights = body.skinning()
-    garment = procedural_skirt(job.garment, body.rest_vertices(shape).numpy(),
-                               body.faces.numpy(), body.joint_names,
-                               indices.numpy(), weights.numpy())
+    garment = fit_procedural_skirt(job.garment, body, shape)
     garment = dataclasses.replace(garment, name=f"{garment.name}@shape{job.shape_index}")
     motion = make_motion(job.motion.kind, body, shape, seconds=seconds, fps=fps,
                          speed=job.motion.speed, amplitude=job.motion.amplitude,

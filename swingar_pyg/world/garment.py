@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -15,12 +16,15 @@ from swingar_pyg.geometry.distance import signed_distance_to_surface
 from swingar_pyg.geometry.mesh import Mesh, as_mesh
 from swingar_pyg.geometry.primitives import split_quads
 
+if TYPE_CHECKING:
+    from swingar_pyg.world.body import BodyModel
+
 # Bones whose vertices do not bound a skirt: in the rest A-pose the hands hang beside
 # the hips, but a skirt goes around the pelvis and legs, not around the arms.
 _ARM_BONE_WORDS = ("Shoulder", "Arm", "Hand", "Thumb", "Finger")
 # Pins (waistband, neckline) ride on the torso: they follow its joints only, or the
 # thighs would drag a waistband out of shape in a stride (measured: 37 % strain running).
-_LIMB_WORDS = ("Leg", "Foot", "Toe", "HipJoint", "Shoulder", "Arm", "Hand", "Thumb", "Finger")
+_LIMB_WORDS = ("Leg", "Foot", "Toe", "HipJoint") + _ARM_BONE_WORDS
 _ENVELOPE_BINS = 72
 
 
@@ -174,6 +178,13 @@ def procedural_skirt(spec: SkirtSpec, body_vertices: np.ndarray, body_faces: np.
     pinned = index[0].copy()
     fit = signed_distance_to_surface(mesh.vertices, body_vertices, body_faces)
     return Garment(spec.name, mesh, pinned, indices, weights, fit)
+
+
+def fit_procedural_skirt(spec: SkirtSpec, body: "BodyModel", shape) -> Garment:
+    """:func:`procedural_skirt` fitted on ``body`` with ``shape``, in its rest pose."""
+    indices, weights = body.skinning()
+    return procedural_skirt(spec, body.rest_vertices(shape).numpy(), body.faces.numpy(),
+                            body.joint_names, indices.numpy(), weights.numpy())
 
 
 def transfer_skinning(vertices: np.ndarray, pinned: np.ndarray, body_vertices: np.ndarray,
