@@ -4,6 +4,7 @@ import torch
 
 from swingar_pyg.geometry import (
     as_mesh,
+    boundary_edges,
     edge_length_graph,
     farthest_point_sampling,
     geodesic_distances,
@@ -163,3 +164,17 @@ def test_farthest_point_sampling_is_seeded_and_spread():
     assert sorted(everything.tolist()) == list(range(36))
     with pytest.raises(ValueError, match='num_samples must be >= 1'):
         farthest_point_sampling(graph, 0)
+
+
+def test_boundary_edges_are_the_open_border():
+    mesh = sheet(4, 5)
+    border = boundary_edges(mesh.faces)
+    # A 4 x 5 grid's border has 2 * (3 + 4) edges, all on the outer rows and columns.
+    assert len(border) == 14
+    on_border = np.zeros(20, bool)
+    on_border[np.arange(20).reshape(4, 5)[[0, -1]].ravel()] = True
+    on_border[np.arange(20).reshape(4, 5)[:, [0, -1]].ravel()] = True
+    assert on_border[border].all()
+    closed = as_mesh([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]],
+                     [[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]])
+    assert len(boundary_edges(closed.faces)) == 0

@@ -6,7 +6,14 @@ from swingar_pyg.geometry.geodesic import (
     farthest_point_sampling,
     geodesic_distances,
 )
-from swingar_pyg.geometry.mesh import Mesh, as_mesh, load_mesh, mesh_edge_index, mesh_edges
+from swingar_pyg.geometry.mesh import (
+    Mesh,
+    as_mesh,
+    boundary_edges,
+    load_mesh,
+    mesh_edge_index,
+    mesh_edges,
+)
 from swingar_pyg.geometry.normals import vertex_normals
 from swingar_pyg.geometry.primitives import roll_into_cylinder, sheet, split_quads
 from swingar_pyg.geometry.spectral import (
@@ -20,6 +27,7 @@ __all__ = [
     "Mesh",
     "SpectralDescriptor",
     "as_mesh",
+    "boundary_edges",
     "edge_length_graph",
     "exact_affinity_spectrum",
     "farthest_point_sampling",

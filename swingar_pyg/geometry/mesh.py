@@ -114,6 +114,14 @@ def mesh_edges(faces: np.ndarray) -> np.ndarray:
     return np.unique(pairs, axis=0)
 
 
+def boundary_edges(faces: np.ndarray) -> np.ndarray:
+    """Edges ``(B, 2)`` (``i < j``) that belong to exactly one triangle: the mesh's
+    open borders (a waistband, a hem, a sleeve end)."""
+    pairs = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+    unique, counts = np.unique(pairs, axis=0, return_counts=True)
+    return unique[counts == 1]
+
+
 def mesh_edge_index(mesh: Mesh, device: torch.device | str | None = None) -> Tensor:
     """The mesh-edge graph as a PyG ``edge_index`` ``(2, 2E)``: every edge in
     both directions, sorted by source then target (coalesced)."""

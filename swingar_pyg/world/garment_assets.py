@@ -22,7 +22,7 @@ import numpy as np
 import torch
 
 from swingar_pyg.geometry.distance import signed_distance_to_surface
-from swingar_pyg.geometry.mesh import Mesh, as_mesh, load_mesh
+from swingar_pyg.geometry.mesh import Mesh, as_mesh, boundary_edges, load_mesh
 from swingar_pyg.geometry.surface_embedding import embed_points, evaluate_embedding
 from swingar_pyg.world.body import BodyModel
 from swingar_pyg.world.garment import Garment, transfer_skinning
@@ -70,10 +70,7 @@ def top_boundary_loop(mesh: Mesh) -> np.ndarray:
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
-    faces = mesh.faces
-    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), 1)
-    unique, counts = np.unique(edges, axis=0, return_counts=True)
-    boundary = unique[counts == 1]
+    boundary = boundary_edges(mesh.faces)
     if not len(boundary):
         raise ValueError("the garment has no boundary to attach to the body")
     n = mesh.num_vertices

@@ -39,11 +39,26 @@ def _ease_in(t: Tensor, seconds: float = 0.5) -> Tensor:
     return u * u * (3 - 2 * u)
 
 
+# How CMU-style rigs name the two sides: (left prefix, right prefix).
+_SIDE_PREFIXES = (("Left", "Right"), ("LHip", "RHip"), ("LThumb", "RThumb"))
+
+
+def joint_side(name: str) -> str:
+    """``"L"``, ``"R"`` or ``""`` (a joint on the body's midline)."""
+    for left, right in _SIDE_PREFIXES:
+        if name.startswith(left):
+            return "L"
+        if name.startswith(right):
+            return "R"
+    return ""
+
+
 def _other_side(name: str) -> str:
-    for a, b in (("Left", "Right"), ("Right", "Left"), ("LHip", "RHip"), ("RHip", "LHip"),
-                 ("LThumb", "RThumb"), ("RThumb", "LThumb")):
-        if name.startswith(a):
-            return b + name[len(a):]
+    for left, right in _SIDE_PREFIXES:
+        if name.startswith(left):
+            return right + name[len(left):]
+        if name.startswith(right):
+            return left + name[len(right):]
     return name
 
 

@@ -22,7 +22,7 @@ import torch
 
 from swingar_pyg.world.body import BodyModel
 from swingar_pyg.world.bvh import BVHClip
-from swingar_pyg.world.motion import Motion
+from swingar_pyg.world.motion import Motion, joint_side
 
 # BVH (+Y up, facing +Z) to this project's frame (+Z up, facing -Y).
 BVH_TO_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
@@ -42,11 +42,6 @@ def _shortest_arc(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         return 2 * np.outer(axis, axis) - np.eye(3)
     cross = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
     return np.eye(3) + cross + cross @ cross / (1 + cos)
-
-
-def _side(name: str) -> str:
-    return "L" if name.startswith(("Left", "LHip", "LThumb")) else \
-        "R" if name.startswith(("Right", "RHip", "RThumb")) else ""
 
 
 def retarget(clip: BVHClip, body: BodyModel, shape: torch.Tensor, fps: float = 30.0,
@@ -90,7 +85,7 @@ def retarget(clip: BVHClip, body: BodyModel, shape: torch.Tensor, fps: float = 3
             continue
         for c in children[j]:
             if body_names[c] not in mapped or "Thumb" in body_names[c] or \
-                    _side(body_names[c]) not in ("", _side(body_names[j])):
+                    joint_side(body_names[c]) not in ("", joint_side(body_names[j])):
                 continue
             rest_direction = rest_heads[c] - rest_heads[j]
             clip_direction = (world_positions[0, mapped[body_names[c]]] -
