@@ -111,7 +111,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="swingar",
         description="SwinGar for PyTorch Geometric: learn how garments of any topology "
-                    "swing on a moving body.")
+                    "swing on a moving body.",
+        epilog="Training: swingar {fit,validate,test,predict} -c configs/<name>.yaml "
+               "(Lightning's CLI; see swingar fit --help).")
     parser.add_argument("--version", action="version", version=f"swingar_pyg {__version__}")
     commands = parser.add_subparsers(dest="command", metavar="COMMAND")
 
@@ -174,10 +176,29 @@ def build_parser() -> argparse.ArgumentParser:
     preview.add_argument("--rigid", action="store_true",
                          help="show the rigidly skinned garment (the baseline) instead")
     preview.set_defaults(run=_preview)
+
+    quickstart = commands.add_parser(
+        "quickstart", help="the main job: make the quickstart data, train, test, and print "
+                           "error and time per frame against rigid skinning and the simulator")
+    quickstart.add_argument("-c", "--config", default="configs/quickstart.yaml")
+    quickstart.set_defaults(run=_quickstart)
     return parser
 
 
+def _quickstart(args: argparse.Namespace) -> int:
+    from swingar_pyg.training.quickstart import run_quickstart
+
+    run_quickstart(args.config)
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv and argv[0] in ("fit", "validate", "test", "predict"):
+        from swingar_pyg.training.cli import build_cli
+
+        build_cli(argv)
+        return 0
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.command is None:

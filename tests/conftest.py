@@ -8,3 +8,19 @@ torch.set_num_threads(1)
 @pytest.fixture(autouse=True)
 def _seed():
     torch.manual_seed(12345)
+
+
+@pytest.fixture(scope='session')
+def tiny_windows(tmp_path_factory):
+    """A prepared SwinGarDataModule over a tiny simulated dataset."""
+    pytest.importorskip('anny')
+    pytest.importorskip('lightning')
+    from datamodules import SwinGarDataModule
+    from tests.windows import SMALL_FEATURES, write_tiny_config
+
+    config = write_tiny_config(tmp_path_factory.mktemp('windows'))
+    module = SwinGarDataModule(config=str(config), generation_workers=1, batch_size=2,
+                               **SMALL_FEATURES)
+    module.prepare_data()
+    module.setup()
+    return module

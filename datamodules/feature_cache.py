@@ -1,0 +1,173 @@
+"""Per-garment and per-sequence features computed once and stored in the
+dataset's HDF5 file, under ``/cache``, with the settings that made them.
+
+Layout added to a file of :mod:`swingar_pyg.world.sequence_file`::
+
+    /cache                   attrs: settings (JSON of FeatureSettings)
+    /cache/garments/<name>/  edge_index (2,E) normals (N,3) [descriptor (z,)]
+    /cache/sequences/<id>/   joint_transforms (T,J,3,4) joint_positions (T,J,3)
+                             body_points body_normals (P,3)
+                             body_skin_indices body_skin_weights (P,K)
+
+The descriptor is :func:`~swingar_pyg.geometry.spectral_descriptor` with
+``normalize=True`` (eigenvalues of ``A / N``, which depend little on mesh
+resolution). Body points are a farthest-point sample of the rest body's
+vertices with their normals and skinning: posing them with a frame's joint
+transforms gives the body surface the collision loss needs, without storing
+the posed body.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from swingar_pyg.atomic import atomic_path
+
+
+@dataclass(frozen=True)
+class FeatureSettings:
+    """What the cache depends on; a change recomputes it.
+
+    Args:
+        descriptor_size: descriptor length ``z``, or ``None`` for none.
+        sigma: Gaussian kernel width of the descriptor (m).
+        weighting: Nyström quadrature, ``"voronoi"`` or ``"uniform"``.
+        seed: first farthest-point sample.
+        body_points: body surface samples for the collision loss.
+    """
+
+    descriptor_size: int | None = 256
+    sigma: float = 0.1
+    weighting: str = "voronoi"
+    seed: int = 0
+    body_points: int = 1024
+
+    def __post_init__(self):
+        if self.descriptor_size is not None and self.descriptor_size < 1:
+            raise ValueError(f"descriptor_size must be >= 1 or None, got {self.descriptor_size}")
+        if self.body_points < 1:
+            raise ValueError(f"body_points must be >= 1, got {self.body_points}")
+
+    def to_json(self) -> str:
+        return json.dumps(asdict(self), sort_keys=True)
+
+
+def cached_settings(path: str | Path) -> FeatureSettings | None:
+    """The settings of the cache in ``path``, or ``None`` if it has none."""
+    import h5py
+
+    with h5py.File(path, "r") as file:
+        if "cache" not in file:
+            return None
+        return FeatureSettings(**json.loads(file["cache"].attrs["settings"]))
+
+
+def farthest_points(points: np.ndarray, count: int) -> np.ndarray:
+    """Indices of ``count`` points spread by greedy farthest-point sampling in
+    Euclidean space, starting from point 0."""
+    count = min(count, len(points))
+    chosen = np.zeros(count, dtype=np.int64)
+    distance = np.linalg.norm(points - points[0], axis=1)
+    for k in range(1, count):
+        chosen[k] = int(np.argmax(distance))
+        distance = np.minimum(distance, np.linalg.norm(points - points[chosen[k]], axis=1))
+    return chosen
+
+
+def ensure_feature_cache(path: str | Path, settings: FeatureSettings, body_model=None,
+                         progress: bool = True) -> bool:
+    """Computes the cache of ``path`` unless it exists with the same settings.
+
+    The file is copied, extended and renamed over the original, so a failure
+    leaves the original untouched. Returns whether anything was computed.
+
+    Args:
+        path: a dataset split file.
+        settings: what to compute.
+        body_model: a :class:`~swingar_pyg.world.body.BodyModel` of the rig the
+            sequences were made for (default: the anny body, built on first need).
+        progress: show a progress bar.
+    """
+    import h5py
+
+    path = Path(path)
+    if cached_settings(path) == settings:
+        return False
+    if body_model is None:
+        from swingar_pyg.world.body import AnnyBody
+
+        body_model = AnnyBody()
+    with atomic_path(path) as tmp:
+        shutil.copyfile(path, tmp)
+        with h5py.File(tmp, "a") as file:
+            if "cache" in file:
+                del file["cache"]
+            cache = file.create_group("cache")
+            _cache_garments(file, cache, settings, progress)
+            _cache_sequences(file, cache, settings, body_model, progress)
+            cache.attrs["settings"] = settings.to_json()
+    return True
+
+
+def _bar(items, description: str, progress: bool):
+    if not progress:
+        return items
+    from tqdm import tqdm
+
+    return tqdm(items, desc=description, unit="item", leave=False)
+
+
+def _cache_garments(file, cache, settings: FeatureSettings, progress: bool) -> None:
+    from swingar_pyg.geometry import as_mesh, mesh_edge_index, spectral_descriptor, vertex_normals
+
+    for name in _bar(list(file["garments"]), "garment features", progress):
+        source = file[f"garments/{name}"]
+        mesh = as_mesh(source["rest_vertices"][:].astype(np.float64), source["faces"][:])
+        group = cache.create_group(f"garments/{name}")
+        group["edge_index"] = mesh_edge_index(mesh).numpy().astype(np.int64)
+        group["normals"] = vertex_normals(torch.as_tensor(mesh.vertices),
+                                          torch.as_tensor(mesh.faces)).numpy().astype(np.float32)
+        if settings.descriptor_size is not None:
+            descriptor = spectral_descriptor(mesh, z=settings.descriptor_size,
+                                             sigma=settings.sigma, normalize=True,
+                                             weighting=settings.weighting, seed=settings.seed)
+            group["descriptor"] = descriptor.eigenvalues.astype(np.float32)
+            group.attrs["valid_eigenvalues"] = descriptor.num_valid
+
+
+def _cache_sequences(file, cache, settings: FeatureSettings, body_model,
+                     progress: bool) -> None:
+    from swingar_pyg.geometry import vertex_normals
+
+    indices, weights = body_model.skinning()
+    faces = body_model.faces
+    bodies: dict[tuple, tuple] = {}
+    for sequence_id in _bar(list(file["sequences"]), "body poses", progress):
+        source = file[f"sequences/{sequence_id}"]
+        shape = torch.as_tensor(source["body_shape"][:])
+        names = tuple(json.loads(source.attrs["joint_names"]))
+        if names != tuple(body_model.joint_names):
+            raise ValueError(f"sequence {sequence_id} was made for another rig than the "
+                             f"body model's ({len(names)} joints, starting {names[:3]})")
+        key = tuple(shape.tolist())
+        if key not in bodies:
+            rest = body_model.rest_vertices(shape)
+            chosen = torch.as_tensor(farthest_points(rest.numpy(), settings.body_points))
+            normals = vertex_normals(rest, faces)
+            bodies[key] = (rest[chosen], normals[chosen], indices[chosen], weights[chosen])
+        posed = body_model.pose(shape, torch.as_tensor(source["rotations"][:]),
+                                torch.as_tensor(source["translation"][:]))
+        group = cache.create_group(f"sequences/{sequence_id}")
+        group["joint_transforms"] = posed.joint_transforms[..., :3, :].numpy().astype(np.float32)
+        group["joint_positions"] = posed.joint_positions.numpy().astype(np.float32)
+        points, normals, skin_indices, skin_weights = bodies[key]
+        group["body_points"] = points.numpy().astype(np.float32)
+        group["body_normals"] = normals.numpy().astype(np.float32)
+        group["body_skin_indices"] = skin_indices.numpy().astype(np.int16)
+        group["body_skin_weights"] = skin_weights.numpy().astype(np.float32)

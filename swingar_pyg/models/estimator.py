@@ -1,0 +1,260 @@
+r"""The SwinGar estimator (paper §3.3, DESIGN §4).
+
+.. math::
+    \mathbf{M}^t = W(\mathbf{M}^0, \boldsymbol\beta, \boldsymbol\theta^{t-m..t})
+
+A garment graph :math:`G^0` with node features :math:`[\mathbf{n}_i, \mathbf{x}_i, a_i]`
+passes through the garment encoder :math:`M_g` (FCA layers); its spectral
+descriptor :math:`\boldsymbol\lambda` through the shape parser :math:`A_s` (MLP).
+An LSTM :math:`M_m` encodes each target frame's pose window into a motion code,
+the body parser :math:`A_b` maps body shape and current pose to a body code. Then
+
+.. math::
+    \mathbf{s} = E(M_g(G^0) \odot \mathbf{c}_m), \qquad
+    (\mathbf{W}^t, \mathbf{B}^t) = P(\mathbf{s} \odot \mathbf{c}_s), \qquad
+    \mathbf{M}_c^t = \mathrm{LBS}(\mathbf{M}^0 + \mathbf{B}^t, \boldsymbol\theta^t, \mathbf{W}^t),
+
+with :math:`E` and :math:`P` stacks of FCA layers and :math:`\mathbf{W}^t` a softmax
+over the body's joints. The detail network :math:`M_d`, an :class:`FCALSTM`, runs
+over :math:`G^{t-2}, G^{t-1}, G^t` built on :math:`\mathbf{M}_c` with features
+:math:`[\mathbf{x}, \lVert \mathbf{x} - \mathbf{j}_k \rVert_{k=1..J}]`, and
+
+.. math::
+    \mathbf{M}^t = \mathbf{M}_c^t + \mathbf{R}_c\, \mathrm{Linear}(\mathbf{h}^t \odot \mathbf{c}_b^t).
+
+Beyond the paper: the skinning logits are added to :math:`\log` of the weights
+transferred from the body (``skinning_prior``), and the last layers of both
+heads and of the correction start at zero, so an untrained estimator is exactly
+rigid skinning with transferred weights and training starts from that baseline.
+Positions fed to :math:`M_d` and its correction are in the canonical frame
+(:mod:`~swingar_pyg.models.pose_features`) of frame ``t``, so the correction
+turns with the body.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor, nn
+
+from swingar_pyg.models.pose_features import pose_feature_size
+from swingar_pyg.nn import FCALSTM, FCAConv, attention_edge_index
+
+if TYPE_CHECKING:
+    from swingar_pyg.models.streaming import SwinGarStream
+
+TARGET_FRAMES = 3
+_PRIOR_FLOOR = 1e-6
+
+
+@dataclass
+class EstimatorOutput:
+    """Predictions at the three target frames: ``vertices`` :math:`\\mathbf{M}`
+    and ``skinned`` :math:`\\mathbf{M}_c`, both ``(3, N, 3)`` in world space."""
+
+    vertices: Tensor
+    skinned: Tensor
+
+
+class FCAStack(nn.Module):
+    """FCA layers, each followed by ELU; heads are averaged."""
+
+    def __init__(self, in_channels: int, channels: int, layers: int, heads: int,
+                 alpha: float, normalize: bool):
+        super().__init__()
+        sizes = [in_channels] + [channels] * layers
+        self.layers = nn.ModuleList(
+            FCAConv(a, b, heads=heads, concat=False, alpha=alpha, normalize=normalize,
+                    add_self_loops=False) for a, b in zip(sizes[:-1], sizes[1:]))
+
+    def forward(self, x: Tensor, edge_index: Tensor) -> Tensor:
+        for layer in self.layers:
+            x = F.elu(layer(x, edge_index))
+        return x
+
+
+def _mlp(in_channels: int, channels: int) -> nn.Sequential:
+    return nn.Sequential(nn.Linear(in_channels, channels), nn.ELU(),
+                         nn.Linear(channels, channels))
+
+
+def skin_points(rest: Tensor, weights: Tensor, transforms: Tensor) -> Tensor:
+    r"""Dense linear blend skinning of points that each have their own
+    transforms: :math:`\sum_j w_{ij} \mathbf{G}_{ij} [\mathbf{x}_i; 1]`.
+
+    Args:
+        rest: ``(N, 3)``; weights: ``(N, J)``; transforms: ``(N, J, 4, 4)``.
+    """
+    blended = torch.einsum("nj,njab->nab", weights, transforms[..., :3, :])
+    return (blended[..., :3] @ rest.unsqueeze(-1)).squeeze(-1) + blended[..., 3]
+
+
+def descriptor_features(descriptor: Tensor) -> Tensor:
+    """Maps eigenvalues of ``A / N`` (in ``[0, 1]``, spanning decades) to
+    ``[0, 1]`` on a log scale: ``1 + log10(max(λ, 1e-6)) / 6``."""
+    return 1.0 + torch.log10(descriptor.clamp_min(1e-6)) / 6.0
+
+
+class SwinGarEstimator(nn.Module):
+    r"""Predicts garment vertices at frames ``t-2, t-1, t`` from a
+    :class:`~swingar_pyg.models.GarmentWindow` (or a Batch of them).
+
+    Args:
+        num_joints (int): joints of the body rig :math:`J`. (default: :obj:`31`)
+        shape_size (int): body shape parameters. (default: :obj:`6`)
+        channels (int): width of every hidden layer. (default: :obj:`64`)
+        garment_layers (int): FCA layers of :math:`M_g`. (default: :obj:`2`)
+        state_layers (int): FCA layers of :math:`E`. (default: :obj:`1`)
+        predictor_layers (int): FCA layers of :math:`P`. (default: :obj:`2`)
+        heads (int): attention heads per FCA layer, averaged. (default: :obj:`1`)
+        alpha (float): FCA score bound. (default: :obj:`2.0`)
+        normalize (bool): :obj:`False` turns every FCA layer into GAT (the
+            "no FCA" ablation). (default: :obj:`True`)
+        descriptor_size (int, optional): descriptor length ``z``; :obj:`None`
+            drops the shape parser (the "no descriptor" ablation).
+            (default: :obj:`256`)
+        history (int): pose history ``m``. (default: :obj:`64`)
+        skinning_prior (bool): start skinning from the transferred weights.
+            (default: :obj:`True`)
+        detail (bool): run :math:`M_d`; :obj:`False` returns :math:`\mathbf{M}_c`.
+            (default: :obj:`True`)
+        detail_channels (int): state size of :math:`M_d` and of the body code;
+            its four gate heads make it the costliest layer per channel.
+            (default: :obj:`32`)
+    """
+
+    def __init__(self, num_joints: int = 31, shape_size: int = 6, channels: int = 64,
+                 garment_layers: int = 2, state_layers: int = 1, predictor_layers: int = 2,
+                 heads: int = 1, alpha: float = 2.0, normalize: bool = True,
+                 descriptor_size: int | None = 256, history: int = 64,
+                 skinning_prior: bool = True, detail: bool = True,
+                 detail_channels: int = 32):
+        super().__init__()
+        if history < 1:
+            raise ValueError(f"the pose history needs at least one frame, got {history}")
+        self.num_joints = num_joints
+        self.descriptor_size = descriptor_size
+        self.history = history
+        self.skinning_prior = skinning_prior
+        pose_size = pose_feature_size(num_joints)
+        stack = dict(heads=heads, alpha=alpha, normalize=normalize)
+        self.garment_encoder = FCAStack(7, channels, garment_layers, **stack)
+        self.shape_parser = (_mlp(descriptor_size, channels)
+                             if descriptor_size is not None else None)
+        self.motion_encoder = nn.LSTM(pose_size + 1, channels, batch_first=True)
+        self.body_parser = _mlp(shape_size + pose_size, detail_channels)
+        self.state_encoder = FCAStack(channels, channels, state_layers, **stack)
+        self.predictor = FCAStack(channels, channels, predictor_layers, **stack)
+        self.skinning_head = nn.Linear(channels, num_joints)
+        self.blend_head = nn.Linear(channels, 3)
+        self.detail = (FCALSTM(3 + num_joints, detail_channels, alpha=alpha,
+                               normalize=normalize, add_self_loops=False) if detail else None)
+        self.correction = nn.Linear(detail_channels, 3) if detail else None
+        for head in (self.skinning_head, self.blend_head, self.correction):
+            if head is not None:
+                nn.init.zeros_(head.weight)
+                nn.init.zeros_(head.bias)
+
+    def encode_garment(self, data) -> tuple[Tensor, Tensor, Tensor]:
+        """The motion-independent part: attention graph, :math:`M_g` features
+        ``(N, C)`` and the shape code per vertex ``(N, C)``."""
+        edge_index = attention_edge_index(data.edge_index, data.num_nodes)
+        x = torch.cat([data.normal, data.rest, data.fit.unsqueeze(-1)], dim=-1)
+        features = self.garment_encoder(x, edge_index)
+        if self.shape_parser is None:
+            shape_code = torch.ones_like(features)
+        else:
+            if data.descriptor.size(-1) != self.descriptor_size:
+                raise ValueError(f"the estimator expects descriptors of length "
+                                 f"{self.descriptor_size}, got {data.descriptor.size(-1)}")
+            shape_code = self.shape_parser(descriptor_features(data.descriptor))[batch_vector(data)]
+        return edge_index, features, shape_code
+
+    def motion_codes(self, pose_history: Tensor, history_mask: Tensor) -> Tensor:
+        """:math:`M_m`: ``(G, F, m, P)`` windows and masks ``(G, F, m)`` → ``(G, F, C)``."""
+        graphs, frames, length, size = pose_history.shape
+        inputs = torch.cat([pose_history, history_mask.unsqueeze(-1)], dim=-1)
+        _, (h, _) = self.motion_encoder(inputs.reshape(graphs * frames, length, size + 1))
+        return h[-1].reshape(graphs, frames, -1)
+
+    def body_codes(self, body_shape: Tensor, pose_history: Tensor) -> Tensor:
+        """:math:`A_b([\\beta, \\theta^k])` for every target frame: ``(G, F, C)``."""
+        current = pose_history[:, :, -1]
+        shape = body_shape.unsqueeze(1).expand(-1, current.size(1), -1)
+        return self.body_parser(torch.cat([shape, current], dim=-1))
+
+    def skin(self, data, edge_index: Tensor, garment_features: Tensor, shape_code: Tensor,
+             motion_code: Tensor, transforms: Tensor) -> Tensor:
+        r""":math:`\mathbf{M}_c` at one frame, given that frame's motion code
+        ``(G, C)`` and skinning transforms ``(G, J, 4, 4)``: ``(N, 3)``."""
+        batch = batch_vector(data)
+        state = self.state_encoder(garment_features * motion_code[batch], edge_index)
+        hidden = self.predictor(state * shape_code, edge_index)
+        logits = self.skinning_head(hidden)
+        if self.skinning_prior:
+            logits = logits + torch.log(data.prior_weights.clamp_min(_PRIOR_FLOOR))
+        weights = torch.softmax(logits, dim=-1)
+        return skin_points(data.rest + self.blend_head(hidden), weights, transforms[batch])
+
+    def refine(self, edge_index: Tensor, batch: Tensor, skinned: Tensor,
+               joint_positions: Tensor, body_codes: Tensor, frame_rotation: Tensor,
+               frame_origin: Tensor) -> Tensor:
+        r""":math:`M_d`: adds the detail correction to ``skinned`` ``(F, N, 3)``,
+        given per garment the joint positions ``(G, F, J, 3)``, body codes
+        ``(G, F, C)`` and the canonical frame of the last frame, ``(G, 3, 3)``
+        and ``(G, 3)``."""
+        rotation, origin = frame_rotation[batch], frame_origin[batch]
+        local = torch.einsum("nba,fnb->fna", rotation, skinned - origin)
+        joints = joint_positions[batch].transpose(0, 1)  # (F, N, J, 3)
+        distances = (skinned.unsqueeze(2) - joints).norm(dim=-1)
+        hidden, _ = self.detail(torch.cat([local, distances], dim=-1), edge_index)
+        correction = self.correction(hidden * body_codes[batch].transpose(0, 1))
+        return skinned + torch.einsum("nab,fnb->fna", rotation, correction)
+
+    def stream(self, garment, body_shape: Tensor, fps: float) -> "SwinGarStream":
+        """Frame-by-frame inference with a rolling cache
+        (:class:`~swingar_pyg.models.streaming.SwinGarStream`)."""
+        from swingar_pyg.models.streaming import SwinGarStream
+
+        return SwinGarStream(self, garment, body_shape, fps)
+
+    def forward(self, data) -> EstimatorOutput:
+        _check_window(data, self.num_joints, self.history)
+        edge_index, features, shape_code = self.encode_garment(data)
+        motion = self.motion_codes(data.pose_history, data.history_mask)
+        skinned = torch.stack([
+            self.skin(data, edge_index, features, shape_code, motion[:, k],
+                      data.joint_transforms[:, k])
+            for k in range(TARGET_FRAMES)])
+        if self.detail is None:
+            return EstimatorOutput(skinned, skinned)
+        codes = self.body_codes(data.body_shape, data.pose_history)
+        vertices = self.refine(edge_index, batch_vector(data), skinned, data.joint_positions, codes,
+                               data.frame_rotation, data.frame_origin)
+        return EstimatorOutput(vertices, skinned)
+
+
+def batch_vector(data) -> Tensor:
+    batch = getattr(data, "batch", None)
+    if batch is None:
+        batch = data.rest.new_zeros(data.num_nodes, dtype=torch.long)
+    return batch
+
+
+def _check_window(data, num_joints: int, history: int) -> None:
+    expected = {"rest": (3,), "normal": (3,), "prior_weights": (num_joints,)}
+    for name, tail in expected.items():
+        value = getattr(data, name, None)
+        if value is None or tuple(value.shape[1:]) != tail:
+            got = None if value is None else tuple(value.shape)
+            raise ValueError(f"data.{name} must have shape (N, {', '.join(map(str, tail))}), "
+                             f"got {got}")
+    windows = data.pose_history.shape
+    if windows[1:3] != (TARGET_FRAMES, history):
+        raise ValueError(f"data.pose_history must hold {TARGET_FRAMES} windows of {history} "
+                         f"frames, got shape {tuple(windows)}")
+    if not torch.isfinite(data.rest).all():
+        raise ValueError("the garment's rest vertices are not finite")

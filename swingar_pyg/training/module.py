@@ -1,0 +1,141 @@
+"""The Lightning experiment: losses, metrics and optimisation around a
+:class:`~swingar_pyg.models.SwinGarEstimator` (which holds the math)."""
+
+from __future__ import annotations
+
+import lightning as L
+import torch
+from lightning.pytorch.core.mixins.hparams_mixin import _given_hyperparameters
+
+from swingar_pyg.models import SwinGarEstimator, losses
+from swingar_pyg.models.estimator import TARGET_FRAMES
+from swingar_pyg.training.vertex_errors import VertexErrors
+
+_LOSSES = ("vertex", "edge", "bending", "velocity", "collision")
+
+
+def garment_family(name: str) -> str:
+    """``"skirt-l0.45-...@shape0"`` → ``"skirt"``."""
+    return name.split("-", 1)[0]
+
+
+class SwinGarModule(L.LightningModule):
+    """Trains a :class:`SwinGarEstimator` on :class:`GarmentWindow` batches.
+
+    Logs every loss term (``train/loss_vertex``, ...) and, for validation and
+    test, per-vertex error at the newest frame ``t`` in millimetres (mean, RMSE,
+    p95) of the estimator and of rigid skinning, over the split and per garment
+    family; :attr:`last_summary` keeps the full per-garment and per-motion
+    table of the last validation or test epoch.
+
+    Args:
+        estimator: the network.
+        vertex_weight, edge_weight, bending_weight, velocity_weight,
+            collision_weight: loss weights (0 skips a term).
+        collision_margin: distance (m) the collision loss keeps from the body.
+        lr: Adam learning rate, annealed by a cosine over the run.
+        weight_decay: AdamW weight decay.
+        compile: run the estimator through :func:`torch.compile`.
+    """
+
+    def __init__(self, estimator: SwinGarEstimator, vertex_weight: float = 1.0,
+                 edge_weight: float = 1.0, bending_weight: float = 1.0,
+                 velocity_weight: float = 1.0, collision_weight: float = 0.1,
+                 collision_margin: float = 0.004, lr: float = 1e-3,
+                 weight_decay: float = 0.0, compile: bool = False):
+        super().__init__()
+        # Made by LightningCLI, the hyperparameters are the config (the estimator as
+        # class_path + init_args), so load_from_checkpoint(path) rebuilds it alone;
+        # made in Python, the estimator is a module and must be passed when loading.
+        made_by_cli = _given_hyperparameters.get() is not None
+        self.save_hyperparameters(ignore=[] if made_by_cli else ["estimator"])
+        self.estimator = estimator
+        self._network = torch.compile(estimator) if compile else estimator
+        self.weights = {"vertex": vertex_weight, "edge": edge_weight,
+                        "bending": bending_weight, "velocity": velocity_weight,
+                        "collision": collision_weight}
+        self.errors = VertexErrors()
+        self.last_summary: dict = {}
+
+    def forward(self, batch):
+        return self._network(batch)
+
+    def _losses(self, batch, prediction: torch.Tensor) -> dict[str, torch.Tensor]:
+        target = batch.target.transpose(0, 1)
+        terms = {}
+        if self.weights["vertex"]:
+            terms["vertex"] = losses.vertex_loss(prediction, target)
+        if self.weights["edge"]:
+            terms["edge"] = losses.edge_length_loss(prediction, target, batch.edge_index)
+        if self.weights["bending"]:
+            terms["bending"] = losses.bending_loss(prediction, target, batch.edge_index)
+        if self.weights["velocity"]:
+            terms["velocity"] = losses.velocity_loss(prediction, target)
+        if self.weights["collision"]:
+            terms["collision"] = sum(
+                losses.collision_loss(prediction[k], batch.batch, *losses.pose_body_points(
+                    batch.body_points, batch.body_normals, batch.body_skin_indices,
+                    batch.body_skin_weights, batch.joint_transforms[:, k]),
+                    margin=self.hparams.collision_margin)
+                for k in range(TARGET_FRAMES)) / TARGET_FRAMES
+        return terms
+
+    def _step(self, batch, stage: str) -> torch.Tensor:
+        prediction = self(batch).vertices
+        terms = self._losses(batch, prediction)
+        loss = sum(self.weights[name] * value for name, value in terms.items())
+        size = batch.num_graphs
+        self.log(f"{stage}/loss", loss, batch_size=size, prog_bar=stage == "train")
+        for name, value in terms.items():
+            self.log(f"{stage}/loss_{name}", value, batch_size=size)
+        if stage != "train":
+            newest = batch.target[:, -1]
+            families = [garment_family(g) for g in batch.garment]
+            for method, vertices in (("estimator", prediction[-1]),
+                                     ("rigid", batch.rigid[:, -1])):
+                errors = 1e3 * (vertices - newest).norm(dim=-1)
+                self.errors.add(method, errors, batch.batch, list(batch.garment),
+                                list(batch.motion))
+                self.errors.add(f"{method}@family", errors, batch.batch, families,
+                                list(batch.motion))
+        return loss
+
+    def training_step(self, batch, batch_index: int) -> torch.Tensor:
+        return self._step(batch, "train")
+
+    def validation_step(self, batch, batch_index: int) -> None:
+        self._step(batch, "val")
+
+    def test_step(self, batch, batch_index: int) -> None:
+        self._step(batch, "test")
+
+    def predict_step(self, batch, batch_index: int):
+        return self(batch).vertices.transpose(0, 1)
+
+    def _summarise(self, stage: str) -> None:
+        if not self.errors:
+            return
+        self.last_summary = self.errors.summary()
+        self.errors = VertexErrors()
+        for method in ("estimator", "rigid"):
+            for key, value in self.last_summary[method]["all"].items():
+                self.log(f"{stage}/{method}_{key}", value, sync_dist=True)
+            for group, stats in self.last_summary[f"{method}@family"].items():
+                if group.startswith("garment:"):
+                    family = group.split(":", 1)[1]
+                    self.log(f"{stage}/{family}/{method}_mean_mm", stats["mean_mm"],
+                             sync_dist=True)
+
+    def on_validation_epoch_end(self) -> None:
+        self._summarise("val")
+
+    def on_test_epoch_end(self) -> None:
+        self._summarise("test")
+
+    def configure_optimizers(self):
+        optimizer = torch.optim.AdamW(self.parameters(), lr=self.hparams.lr,
+                                      weight_decay=self.hparams.weight_decay)
+        steps = max(int(self.trainer.estimated_stepping_batches), 1)
+        schedule = torch.optim.lr_scheduler.CosineAnnealingLR(optimizer, steps)
+        return {"optimizer": optimizer,
+                "lr_scheduler": {"scheduler": schedule, "interval": "step"}}

@@ -1,0 +1,158 @@
+import copy
+import math
+
+import pytest
+import torch
+from torch_geometric.data import Batch
+
+from swingar_pyg.models import SwinGarEstimator, pose_window
+from swingar_pyg.models.pose_features import heading_rotation
+from tests.windows import SMALL_ESTIMATOR
+
+
+def rotation_z(angle: float) -> torch.Tensor:
+    c, s = math.cos(angle), math.sin(angle)
+    return torch.tensor([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def random_rotations(count: int) -> torch.Tensor:
+    q, r = torch.linalg.qr(torch.randn(count, 3, 3))
+    q = q * torch.sign(torch.diagonal(r, dim1=-2, dim2=-1)).unsqueeze(-2)
+    return q * torch.det(q).sign()[:, None, None]
+
+
+def trained_like(**kwargs) -> SwinGarEstimator:
+    """An estimator whose zero-initialised heads are randomised, so every
+    branch contributes to the output."""
+    model = SwinGarEstimator(**{**SMALL_ESTIMATOR, **kwargs})
+    for head in (model.skinning_head, model.blend_head, model.correction):
+        if head is not None:
+            torch.nn.init.normal_(head.weight, std=0.05)
+    return model.eval()
+
+
+def test_pose_features_ignore_heading_and_position_on_the_floor():
+    rotations, translation = random_rotations(40).reshape(10, 4, 3, 3), torch.randn(10, 3)
+    turn = rotation_z(1.1)
+    moved_rotations = turn @ rotations
+    moved_translation = translation @ turn.T + torch.tensor([3.0, -2.0, 0.0])
+    for end in (0, 5, 9):
+        a = pose_window(rotations, translation, 30.0, end, 6)
+        b = pose_window(moved_rotations, moved_translation, 30.0, end, 6)
+        assert torch.allclose(a[0], b[0], atol=1e-5)
+        assert torch.equal(a[1], b[1])
+    features, mask, _, _ = pose_window(rotations, translation, 30.0, 2, 6)
+    assert mask.tolist() == [0, 0, 0, 1, 1, 1] and not features[:3].any()
+    # velocity at the first frame of the sequence is zero, then the finite difference
+    assert not features[3, -3:].any()
+    turn_back = heading_rotation(rotations[2, 0]).T
+    expected = 30.0 * turn_back @ (translation[2] - translation[1])
+    assert torch.allclose(features[5, -3:], expected, atol=1e-5)
+
+
+def test_heading_is_a_turn_about_up_even_lying_down():
+    lying = torch.tensor([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])  # faces -Z
+    for rotation in (lying, rotation_z(0.7), *random_rotations(5)):
+        heading = heading_rotation(rotation)
+        assert torch.isfinite(heading).all()
+        assert torch.allclose(heading @ heading.T, torch.eye(3), atol=1e-6)
+        assert torch.allclose(heading[2], torch.tensor([0.0, 0.0, 1.0]))
+    assert torch.allclose(heading_rotation(rotation_z(0.7)), rotation_z(0.7), atol=1e-6)
+
+
+def test_untrained_estimator_is_rigid_skinning(tiny_windows):
+    batch = next(iter(tiny_windows.val_dataloader()))
+    model = SwinGarEstimator(**SMALL_ESTIMATOR).eval()
+    with torch.no_grad():
+        out = model(batch)
+    assert torch.allclose(out.vertices.transpose(0, 1), batch.rigid, atol=2e-5)
+
+
+def test_batch_equals_each_garment_alone(tiny_windows):
+    dataset = tiny_windows.datasets['train']
+    windows = [dataset[0], dataset[len(dataset) - 1], dataset[3]]
+    assert len({w.num_nodes for w in windows}) > 1
+    model = trained_like()
+    with torch.no_grad():
+        together = model(Batch.from_data_list(windows)).vertices
+        alone = torch.cat([model(Batch.from_data_list([w])).vertices for w in windows], dim=1)
+    assert torch.allclose(together, alone, atol=1e-5)
+
+
+@pytest.mark.parametrize('detail', [True, False])
+def test_stream_equals_the_windowed_estimator(tiny_windows, detail):
+    dataset = tiny_windows.datasets['test']
+    sequence = dataset.sequences[0]
+    model = trained_like(detail=detail)
+    window = dataset[0]
+    stream = model.stream(window, sequence.body_shape, sequence.fps)
+    with torch.no_grad():
+        for t in range(len(sequence.target)):
+            streamed = stream.step(sequence.rotations[t], sequence.translation[t],
+                                   sequence.joint_transforms[t], sequence.joint_positions[t])
+            index = dataset.windows.index((0, t))
+            windowed = model(Batch.from_data_list([dataset[index]])).vertices[-1]
+            assert torch.allclose(streamed, windowed, atol=1e-5), t
+
+
+def test_estimator_is_equivariant_to_turning_the_motion(tiny_windows):
+    window = tiny_windows.datasets['test'][6]
+    turned = copy.copy(window)
+    turn = torch.eye(4)
+    turn[:3, :3] = rotation_z(0.8)
+    turn[:3, 3] = torch.tensor([0.5, -1.0, 0.0])
+    turned.joint_transforms = turn @ window.joint_transforms
+    turned.joint_positions = window.joint_positions @ turn[:3, :3].T + turn[:3, 3]
+    turned.frame_rotation = turn[:3, :3] @ window.frame_rotation
+    turned.frame_origin = window.frame_origin @ turn[:3, :3].T + turn[:3, 3]
+    model = trained_like()
+    with torch.no_grad():
+        a = model(Batch.from_data_list([window])).vertices
+        b = model(Batch.from_data_list([turned])).vertices
+    assert torch.allclose(a @ turn[:3, :3].T + turn[:3, 3], b, atol=1e-5)
+
+
+def test_estimator_gradients_match_finite_differences(tiny_windows):
+    batch = Batch.from_data_list([tiny_windows.datasets['val'][4]])
+    batch = batch.apply(lambda x: x.double() if x.is_floating_point() else x)
+    model = trained_like().double()
+    names = ['correction.weight', 'blend_head.weight', 'garment_encoder.layers.0.lin.weight',
+             'motion_encoder.weight_hh_l0']
+    parameters = dict(model.named_parameters())
+
+    def loss(values):
+        return torch.func.functional_call(model, dict(zip(names, values)),
+                                          (batch,)).vertices.square().sum()
+
+    values = [parameters[name].detach().clone().requires_grad_() for name in names]
+    analytic = torch.autograd.grad(loss(values), values)
+    step = 1e-6
+    for k, name in enumerate(names):
+        index = tuple(int(torch.randint(s, ())) for s in values[k].shape)
+        shifted = []
+        for sign in (1, -1):
+            moved = [v.detach().clone() for v in values]
+            moved[k][index] += sign * step
+            shifted.append(loss(moved))
+        numeric = (shifted[0] - shifted[1]) / (2 * step)
+        assert torch.isclose(analytic[k][index], numeric, rtol=1e-4, atol=1e-9), name
+
+
+def test_bad_windows_are_refused_by_name(tiny_windows):
+    window = tiny_windows.datasets['val'][0]
+    model = SwinGarEstimator(**SMALL_ESTIMATOR)
+    broken = copy.copy(window)
+    broken.prior_weights = window.prior_weights[:, :5]
+    with pytest.raises(ValueError, match='prior_weights'):
+        model(Batch.from_data_list([broken]))
+    with pytest.raises(ValueError, match='descriptors of length 32'):
+        SwinGarEstimator(**{**SMALL_ESTIMATOR, 'descriptor_size': 32})(
+            Batch.from_data_list([window]))
+    with pytest.raises(ValueError, match='3 windows of 12 frames'):
+        SwinGarEstimator(**{**SMALL_ESTIMATOR, 'history': 12})(Batch.from_data_list([window]))
+    infinite = copy.copy(window)
+    infinite.rest = window.rest.clone()
+    infinite.rest[0, 0] = float('inf')
+    with pytest.raises(ValueError, match='not finite'):
+        model(Batch.from_data_list([infinite]))
+

@@ -1,0 +1,150 @@
+import json
+import os
+import shutil
+
+import pytest
+import torch
+from torch_geometric.data import Batch
+
+from swingar_pyg.models import SwinGarEstimator
+from tests.windows import SMALL_ESTIMATOR, SMALL_FEATURES
+
+L = pytest.importorskip('lightning')
+
+
+def test_overfits_one_short_sequence(tiny_windows):
+    from swingar_pyg.training import SwinGarModule
+
+    dataset = tiny_windows.datasets['train']
+    batch = Batch.from_data_list([dataset[k] for k, (s, _) in enumerate(dataset.windows)
+                                  if s == 0])
+    module = SwinGarModule(SwinGarEstimator(**SMALL_ESTIMATOR), collision_weight=0.0)
+    optimizer = torch.optim.Adam(module.parameters(), lr=1e-2)
+    losses = []
+    for _ in range(300):
+        optimizer.zero_grad()
+        terms = module._losses(batch, module(batch).vertices)
+        loss = sum(module.weights[name] * value for name, value in terms.items())
+        loss.backward()
+        optimizer.step()
+        losses.append(loss.detach().item())
+    assert losses[-1] < losses[0] / 10, (losses[0], losses[-1])
+
+
+def _small_fit_args(tiny_windows, root) -> list[str]:
+    return ['-c', 'configs/quickstart.yaml', '--data.config', tiny_windows.hparams.config,
+            '--data.generation_workers', '1', '--data.batch_size', '2',
+            *[f'--data.{k}={v}' for k, v in SMALL_FEATURES.items()],
+            *[f'--model.estimator.init_args.{k}={v}' for k, v in SMALL_ESTIMATOR.items()],
+            '--trainer.max_steps', '4', '--trainer.val_check_interval', '2',
+            '--trainer.log_every_n_steps', '1',
+            '--trainer.limit_val_batches', '2', '--trainer.enable_progress_bar', 'false',
+            '--trainer.enable_model_summary', 'false',
+            '--trainer.default_root_dir', str(root),
+            '--trainer.logger.init_args.save_dir', str(root),
+            '--trainer.callbacks', json.dumps([{
+                'class_path': 'lightning.pytorch.callbacks.ModelCheckpoint',
+                'init_args': {'dirpath': str(root / 'checkpoints'), 'save_last': True}}])]
+
+
+@pytest.mark.filterwarnings('ignore:Checkpoint directory .* exists and is not empty')
+def test_cli_fits_from_the_quickstart_config_and_resumes(tiny_windows, tmp_path):
+    import csv
+
+    from swingar_pyg.cli import main
+    from swingar_pyg.training import SwinGarModule
+
+    assert main(['fit', *_small_fit_args(tiny_windows, tmp_path)]) == 0
+    last = tmp_path / 'checkpoints' / 'last.ckpt'
+    metrics = (tmp_path / 'logs' / 'version_0' / 'metrics.csv').read_text().splitlines()
+    rows = list(csv.DictReader(metrics))
+    errors = [float(r['val/estimator_mean_mm']) for r in rows if r.get('val/estimator_mean_mm')]
+    assert len(errors) == 2 and all(0 < e < 1e3 for e in errors)
+    # the checkpoint is self-contained: the estimator comes back from its config
+    module = SwinGarModule.load_from_checkpoint(last)
+    assert module.estimator.history == SMALL_FEATURES['history']
+    # resuming continues from step 4 with the saved optimizer state
+    saved = torch.load(last, weights_only=False)
+    args = _small_fit_args(tiny_windows, tmp_path)
+    args[args.index('--trainer.max_steps') + 1] = '6'
+    main(['fit', *args, '--ckpt_path', str(last)])
+    resumed = torch.load(last, weights_only=False)
+    assert saved['global_step'] == 4 and resumed['global_step'] == 6
+    moment = 'exp_avg'
+    assert not torch.equal(saved['optimizer_states'][0]['state'][0][moment],
+                           resumed['optimizer_states'][0]['state'][0][moment])
+
+
+def test_checkpoint_round_trip_gives_identical_predictions(tiny_windows, tmp_path):
+    from swingar_pyg.training import SwinGarModule
+
+    module = SwinGarModule(SwinGarEstimator(**SMALL_ESTIMATOR))
+    trainer = L.Trainer(max_steps=3, limit_val_batches=1, logger=False,
+                        enable_checkpointing=False, enable_progress_bar=False,
+                        enable_model_summary=False, default_root_dir=tmp_path)
+    trainer.fit(module, datamodule=tiny_windows)
+    path = tmp_path / 'model.ckpt'
+    trainer.save_checkpoint(path)
+    loaded = SwinGarModule.load_from_checkpoint(path, estimator=SwinGarEstimator(
+        **SMALL_ESTIMATOR))
+    batch = next(iter(tiny_windows.test_dataloader()))
+    module.eval()
+    loaded.eval()
+    with torch.no_grad():
+        assert torch.equal(module(batch).vertices, loaded(batch).vertices)
+        assert not torch.equal(module(batch).vertices, module(batch).skinned)
+
+
+def test_feature_cache_is_reused_and_recomputed_when_settings_change(tiny_windows):
+    from datamodules import FeatureSettings, ensure_feature_cache
+
+    path = tiny_windows.split_path('val')
+    stamp = os.stat(path).st_mtime_ns
+    assert not ensure_feature_cache(path, tiny_windows.settings, progress=False)
+    assert os.stat(path).st_mtime_ns == stamp
+    copy = path.with_name('copy.h5')
+    shutil.copyfile(path, copy)
+    other = FeatureSettings(**{**tiny_windows.settings.__dict__, 'descriptor_size': 8})
+    assert ensure_feature_cache(copy, other, progress=False)
+    from datamodules import GarmentWindowDataset
+
+    window = GarmentWindowDataset(copy, other, history=8)[0]
+    assert window.descriptor.shape == (1, 8)
+    with pytest.raises(ValueError, match='no feature cache'):
+        GarmentWindowDataset(copy, tiny_windows.settings)
+
+
+class _RecordBatches(L.Callback):
+    def __init__(self):
+        self.seen = []
+
+    def on_train_batch_start(self, trainer, module, batch, batch_index):
+        self.seen.append(list(zip(batch.sequence, batch.frame.tolist())))
+
+
+def _trainer(root, steps, record, *callbacks):
+    return L.Trainer(max_steps=steps, limit_val_batches=0, logger=False,
+                     enable_progress_bar=False, enable_model_summary=False,
+                     default_root_dir=root, callbacks=[record, *callbacks])
+
+
+@pytest.mark.filterwarnings('ignore:.*limit_val_batches=0.*')
+@pytest.mark.filterwarnings('ignore:Be aware that when using .ckpt_path.')
+def test_resuming_mid_epoch_continues_with_the_next_batch(tiny_windows, tmp_path):
+    from swingar_pyg.training import SwinGarModule
+
+    whole = _RecordBatches()
+    _trainer(tmp_path / 'a', 15, whole).fit(SwinGarModule(SwinGarEstimator(**SMALL_ESTIMATOR)),
+                                     datamodule=tiny_windows)
+    first, second = _RecordBatches(), _RecordBatches()
+    every_ten = L.pytorch.callbacks.ModelCheckpoint(tmp_path / 'ckpt', 'mid',
+                                                    every_n_train_steps=10)
+    _trainer(tmp_path / 'b', 10, first, every_ten).fit(
+        SwinGarModule(SwinGarEstimator(**SMALL_ESTIMATOR)), datamodule=tiny_windows)
+    _trainer(tmp_path / 'c', 15, second).fit(
+        SwinGarModule(SwinGarEstimator(**SMALL_ESTIMATOR)), datamodule=tiny_windows,
+        ckpt_path=tmp_path / 'ckpt' / 'mid.ckpt')
+    assert len(tiny_windows.train_dataloader()) == 12  # so step 13 starts epoch 2
+    assert first.seen == whole.seen[:10]
+    assert second.seen == whole.seen[10:]
+    assert whole.seen[12] != whole.seen[0]  # a new order in the new epoch
