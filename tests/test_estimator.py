@@ -34,7 +34,8 @@ def trained_like(**kwargs) -> SwinGarEstimator:
 def test_pose_features_ignore_heading_and_position_on_the_floor():
     rotations, translation = random_rotations(40).reshape(10, 4, 3, 3), torch.randn(10, 3)
     turn = rotation_z(1.1)
-    moved_rotations = turn @ rotations
+    moved_rotations = rotations.clone()  # joints turn relative to their parents:
+    moved_rotations[:, 0] = turn @ rotations[:, 0]  # only the root turns with the body
     moved_translation = translation @ turn.T + torch.tensor([3.0, -2.0, 0.0])
     for end in (0, 5, 9):
         a = pose_window(rotations, translation, 30.0, end, 6)
@@ -43,11 +44,24 @@ def test_pose_features_ignore_heading_and_position_on_the_floor():
         assert torch.equal(a[1], b[1])
     features, mask, _, _ = pose_window(rotations, translation, 30.0, 2, 6)
     assert mask.tolist() == [0, 0, 0, 1, 1, 1] and not features[:3].any()
-    # velocity at the first frame of the sequence is zero, then the finite difference
-    assert not features[3, -3:].any()
+    # rates at the first frame of the sequence are zero, then finite differences
+    assert not features[3, -4:].any()
     turn_back = heading_rotation(rotations[2, 0]).T
     expected = 30.0 * turn_back @ (translation[2] - translation[1])
-    assert torch.allclose(features[5, -3:], expected, atol=1e-5)
+    assert torch.allclose(features[5, -4:-1], expected, atol=1e-5)
+
+
+def test_spinning_in_place_looks_the_same_however_far_it_turned():
+    rate = 5.0  # rad/s, ~0.8 turns per second: 4 turns in 5 s
+    frames = 150
+    tilt = random_rotations(1)[0]
+    rotations = random_rotations(3)[None].repeat(frames, 1, 1, 1)
+    rotations[:, 0] = torch.stack([rotation_z(rate * k / 30.0) @ tilt for k in range(frames)])
+    translation = torch.zeros(frames, 3)
+    early, _, _, _ = pose_window(rotations, translation, 30.0, 20, 8)
+    late, _, _, _ = pose_window(rotations, translation, 30.0, 140, 8)
+    assert torch.allclose(early, late, atol=1e-4)
+    assert torch.allclose(late[:, -1], torch.full((8,), rate), atol=1e-4)
 
 
 def test_heading_is_a_turn_about_up_even_lying_down():
@@ -96,15 +110,24 @@ def test_stream_equals_the_windowed_estimator(tiny_windows, detail):
 
 
 def test_estimator_is_equivariant_to_turning_the_motion(tiny_windows):
-    window = tiny_windows.datasets['test'][6]
-    turned = copy.copy(window)
+    """Turn and move the motion on the floor (only the root's rotation changes,
+    joints turn relative to their parents): the garment turns and moves with it."""
+    dataset = tiny_windows.datasets['test']
+    sequence, t = dataset.sequences[0], 6
+    window = dataset[dataset.windows.index((0, t))]
     turn = torch.eye(4)
-    turn[:3, :3] = rotation_z(0.8)
+    turn[:3, :3] = rotation_z(2.5)
     turn[:3, 3] = torch.tensor([0.5, -1.0, 0.0])
+    rotations = sequence.rotations.clone()
+    rotations[:, 0] = turn[:3, :3] @ rotations[:, 0]
+    translation = sequence.translation @ turn[:3, :3].T + turn[:3, 3]
+    frames = [t - 2, t - 1, t]
+    windows = [pose_window(rotations, translation, sequence.fps, k, 8) for k in frames]
+    turned = copy.copy(window)
+    turned.pose_history = torch.stack([w[0] for w in windows])[None]
+    turned.frame_rotation, turned.frame_origin = windows[-1][2][None], windows[-1][3][None]
     turned.joint_transforms = turn @ window.joint_transforms
     turned.joint_positions = window.joint_positions @ turn[:3, :3].T + turn[:3, 3]
-    turned.frame_rotation = turn[:3, :3] @ window.frame_rotation
-    turned.frame_origin = window.frame_origin @ turn[:3, :3].T + turn[:3, 3]
     model = trained_like()
     with torch.no_grad():
         a = model(Batch.from_data_list([window])).vertices

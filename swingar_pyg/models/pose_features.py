@@ -1,26 +1,31 @@
-r"""Pose-history features for the motion encoder, in a heading-free frame.
+r"""Pose-history features for the motion encoder, free of heading and floor position.
 
-Poses follow :mod:`swingar_pyg.world.body`: per-joint rotations ``R_j`` relative
-to the rest pose in world-aligned axes, and the root position ``p``; +Z is up and
-the rest body faces −Y. A window of poses ending at frame ``t`` is expressed in
-the *canonical frame* of ``t``: origin at the root position ``p_t``, axes turned
-by the root's heading (a rotation ``R_c`` about +Z). Turning or moving the whole
-motion on the floor then leaves the features unchanged, while tilt (the
-direction of gravity in the body frame) stays visible.
-
-Per frame ``k`` the features are, with ``J`` joints (``6 J + 6`` numbers):
+Poses follow :mod:`swingar_pyg.world.body` (SMPL's convention): joint rotations
+``R_j`` relative to the parent at rest, the root's ``R_0`` in world axes, and the
+root position ``p``; +Z is up and the rest body faces −Y. The *heading* of a
+frame is the root's turn about +Z, ``R_h`` with angle ``ψ``
+(:func:`heading_rotation`); only the root carries it. Per frame ``k`` of a
+window ending at frame ``t`` the features are (``6 J + 7`` numbers):
 
 .. math::
-    \bigl[\, \mathrm{6D}(\mathbf{R}_c^\top \mathbf{R}_{k,j})_{j=1..J},\;
-    \mathbf{R}_c^\top (\mathbf{p}_k - \mathbf{p}_t),\;
-    f\, \mathbf{R}_c^\top (\mathbf{p}_k - \mathbf{p}_{k-1}) \,\bigr]
+    \bigl[\, \mathrm{6D}(\mathbf{R}_{h,k}^\top \mathbf{R}_{k,0}),\;
+    \mathrm{6D}(\mathbf{R}_{k,j})_{j=1..J-1},\;
+    \mathbf{R}_{h,t}^\top (\mathbf{p}_k - \mathbf{p}_t),\;
+    f\, \mathbf{R}_{h,t}^\top (\mathbf{p}_k - \mathbf{p}_{k-1}),\;
+    f\, \mathrm{wrap}(\psi_k - \psi_{k-1}) \,\bigr]
 
-where 6D takes the first two columns of a rotation and ``f`` is the frame rate
-(the velocity is zero at a sequence's first frame). Frames before the sequence
-start are zero with mask 0.
+that is the pose without its heading, the trajectory and velocity in the
+*canonical frame* of ``t`` (origin ``p_t``, axes turned by ``R_{h,t}``), and the
+rate of turn; 6D takes the first two columns of a rotation and ``f`` is the
+frame rate (rates are zero at a sequence's first frame). Turning or moving the
+whole motion on the floor leaves the features unchanged, tilt stays visible,
+and a body spinning in place looks like a body turning at that rate, however
+far it has turned. Frames before the sequence start are zero with mask 0.
 """
 
 from __future__ import annotations
+
+import math
 
 import torch
 from torch import Tensor
@@ -28,22 +33,25 @@ from torch import Tensor
 
 def pose_feature_size(num_joints: int) -> int:
     """Length of one frame's feature vector for a rig of ``num_joints`` joints."""
-    return 6 * num_joints + 6
+    return 6 * num_joints + 7
 
 
-def heading_rotation(root_rotation: Tensor) -> Tensor:
-    """The rotation about +Z that turns the rest forward (−Y) onto the root's
-    forward direction projected on the floor; ``(..., 3, 3)`` → ``(..., 3, 3)``.
-
-    When the root faces straight up or down (lying on the floor), its up axis
-    projected on the floor serves as forward instead.
-    """
+def heading_angle(root_rotation: Tensor) -> Tensor:
+    """The heading ``ψ`` of root rotations ``(..., 3, 3)``: the angle about +Z that
+    turns the rest forward (−Y) onto the root's forward direction projected on
+    the floor. When the root faces straight up or down (lying on the floor), its
+    up axis projected on the floor serves as forward instead."""
     forward = -root_rotation[..., :2, 1]
     up = root_rotation[..., :2, 2]
     lying = forward.norm(dim=-1, keepdim=True) < 1e-4
     heading = torch.where(lying, up, forward)
-    heading = heading / heading.norm(dim=-1, keepdim=True)
-    sin, cos = heading[..., 0], -heading[..., 1]
+    return torch.atan2(heading[..., 0], -heading[..., 1])
+
+
+def heading_rotation(root_rotation: Tensor) -> Tensor:
+    """The rotation about +Z by :func:`heading_angle`; ``(..., 3, 3)``."""
+    angle = heading_angle(root_rotation)
+    sin, cos = torch.sin(angle), torch.cos(angle)
     zero, one = torch.zeros_like(sin), torch.ones_like(sin)
     return torch.stack([torch.stack([cos, -sin, zero], -1),
                         torch.stack([sin, cos, zero], -1),
@@ -62,7 +70,7 @@ def pose_window(rotations: Tensor, translation: Tensor, fps: float, end: int,
         length: frames in the window (the pose history ``m``).
 
     Returns:
-        ``features (length, 6J+6)``, ``mask (length,)`` (1 for real frames),
+        ``features (length, 6J+7)``, ``mask (length,)`` (1 for real frames),
         ``frame_rotation (3, 3)`` = ``R_c`` and ``frame_origin (3,)`` = ``p_t``.
     """
     frames, joints = rotations.shape[:2]
@@ -71,18 +79,23 @@ def pose_window(rotations: Tensor, translation: Tensor, fps: float, end: int,
     if length < 1:
         raise ValueError(f"the pose history needs at least one frame, got {length}")
     start = max(end - length + 1, 0)
+    frames_before = (torch.arange(start, end + 1, device=translation.device) - 1).clamp(min=0)
     rot = rotations[start:end + 1]
     pos = translation[start:end + 1]
-    frames_before = torch.arange(start, end + 1, device=translation.device) - 1
-    previous = translation[frames_before.clamp(min=0)]
+    angle = heading_angle(rotations[start:end + 1, 0])
+    turn_rate = torch.remainder(angle - heading_angle(rotations[frames_before, 0]) + math.pi,
+                                2 * math.pi) - math.pi
     frame_rotation = heading_rotation(rotations[end, 0])
     frame_origin = translation[end]
     turn = frame_rotation.T
-    local = (turn @ rot)[..., :, :2].transpose(-1, -2).reshape(len(rot), joints * 6)
+    unturned = rot.clone()
+    unturned[:, 0] = heading_rotation(rot[:, 0]).transpose(-1, -2) @ rot[:, 0]
+    local = unturned[..., :, :2].transpose(-1, -2).reshape(len(rot), joints * 6)
     offset = (pos - frame_origin) @ turn.T
-    velocity = fps * (pos - previous) @ turn.T
+    velocity = fps * (pos - translation[frames_before]) @ turn.T
     features = rotations.new_zeros(length, pose_feature_size(joints))
-    features[length - len(rot):] = torch.cat([local, offset, velocity], dim=-1)
+    features[length - len(rot):] = torch.cat(
+        [local, offset, velocity, fps * turn_rate[:, None]], dim=-1)
     mask = rotations.new_zeros(length)
     mask[length - len(rot):] = 1.0
     return features, mask, frame_rotation, frame_origin

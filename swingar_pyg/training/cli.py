@@ -6,12 +6,33 @@ from __future__ import annotations
 import sys
 from unittest import mock
 
-from lightning.pytorch.cli import LightningCLI
+from jsonargparse import Namespace
+from lightning.pytorch.callbacks import ModelCheckpoint
+from lightning.pytorch.cli import LightningArgumentParser, LightningCLI
 
 from datamodules import SwinGarDataModule
 from swingar_pyg.training.module import SwinGarModule
 
 LIGHTNING_COMMANDS = ("fit", "validate", "test", "predict")
+
+
+class SwinGarCLI(LightningCLI):
+    """Adds a ``checkpoint:`` section (a :class:`ModelCheckpoint`) whose folder
+    is ``<trainer.default_root_dir>/checkpoints``, and logs to CSV under
+    ``<trainer.default_root_dir>/logs`` unless the config names a logger, so a
+    config that changes the run's folder (an ablation) moves everything with it."""
+
+    def add_arguments_to_parser(self, parser: LightningArgumentParser) -> None:
+        parser.add_lightning_class_args(ModelCheckpoint, "checkpoint")
+        parser.link_arguments("trainer.default_root_dir", "checkpoint.dirpath",
+                              compute_fn=lambda root: f"{root}/checkpoints")
+
+    def before_instantiate_classes(self) -> None:
+        config = self.config[self.subcommand] if self.subcommand else self.config
+        if config.trainer.logger in (None, True):
+            config.trainer.logger = Namespace(
+                class_path="lightning.pytorch.loggers.CSVLogger",
+                init_args=Namespace(save_dir=config.trainer.default_root_dir, name="logs"))
 
 
 def build_cli(argv: list[str], run: bool = True) -> LightningCLI:
@@ -21,5 +42,5 @@ def build_cli(argv: list[str], run: bool = True) -> LightningCLI:
     # Lightning reads sys.argv unless given args, and warns when both are set
     # (always, under `swingar quickstart` or pytest); so the args become argv.
     with mock.patch.object(sys, "argv", [sys.argv[0], *argv]):
-        return LightningCLI(SwinGarModule, SwinGarDataModule, seed_everything_default=0,
-                            save_config_kwargs={"overwrite": True}, run=run)
+        return SwinGarCLI(SwinGarModule, SwinGarDataModule, seed_everything_default=0,
+                          save_config_kwargs={"overwrite": True}, run=run)

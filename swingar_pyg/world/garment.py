@@ -13,7 +13,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from swingar_pyg.geometry.distance import signed_distance_to_surface
-from swingar_pyg.geometry.mesh import Mesh, as_mesh
+from swingar_pyg.geometry.mesh import Mesh, as_mesh, boundary_edges
 from swingar_pyg.geometry.primitives import split_quads
 
 if TYPE_CHECKING:
@@ -218,3 +218,35 @@ def _interpolate_rings(radius: np.ndarray, ring_position: np.ndarray,
     top = radius[r0, s0] * (1 - fs) + radius[r0, s1] * fs
     bottom = radius[r1, s0] * (1 - fs) + radius[r1, s1] * fs
     return top * (1 - fr) + bottom * fr
+
+
+def top_boundary_loop(mesh: Mesh) -> np.ndarray:
+    """Vertices of the mesh's highest boundary loop (a waistband or a neckline)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    boundary = boundary_edges(mesh.faces)
+    if not len(boundary):
+        raise ValueError("the garment has no boundary to attach to the body")
+    n = mesh.num_vertices
+    graph = coo_matrix((np.ones(len(boundary)), (boundary[:, 0], boundary[:, 1])), shape=(n, n))
+    _, label = connected_components(graph, directed=False)
+    on_boundary = np.unique(boundary)
+    loops = {k: on_boundary[label[on_boundary] == k] for k in np.unique(label[on_boundary])}
+    return max(loops.values(), key=lambda loop: mesh.vertices[loop, 2].mean())
+
+
+def garment_on_body(name: str, mesh: Mesh, body: "BodyModel", shape) -> Garment:
+    """A garment mesh already dressed on ``body``'s rest pose with ``shape``
+    (metres, +Z up), made ready to animate: pinned at its highest boundary loop
+    (waistband or neckline, skinned to the torso), skinning transferred from the
+    body, and the fit attribute measured on that body."""
+    mesh = as_mesh(mesh.vertices, mesh.faces)
+    rest = body.rest_vertices(shape).numpy().astype(np.float64)
+    faces = body.faces.numpy()
+    pinned = top_boundary_loop(mesh)
+    indices, weights = body.skinning()
+    skin_indices, skin_weights = transfer_skinning(mesh.vertices, pinned, rest, body.joint_names,
+                                                   indices.numpy(), weights.numpy())
+    fit = signed_distance_to_surface(mesh.vertices, rest, faces)
+    return Garment(name, mesh, pinned, skin_indices, skin_weights, fit)

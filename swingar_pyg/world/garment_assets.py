@@ -21,11 +21,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from swingar_pyg.geometry.distance import signed_distance_to_surface
-from swingar_pyg.geometry.mesh import Mesh, as_mesh, boundary_edges, load_mesh
+from swingar_pyg.geometry.mesh import Mesh, as_mesh, load_mesh
 from swingar_pyg.geometry.surface_embedding import embed_points, evaluate_embedding
 from swingar_pyg.world.body import BodyModel
-from swingar_pyg.world.garment import Garment, transfer_skinning
+from swingar_pyg.world.garment import Garment, garment_on_body
 
 _HM08_TO_METRES_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]]) / 10.0
 
@@ -65,22 +64,6 @@ def _hm08_body() -> np.ndarray:
         return np.load(path).astype(np.float64)
 
 
-def top_boundary_loop(mesh: Mesh) -> np.ndarray:
-    """Vertices of the mesh's highest boundary loop (a waistband or a neckline)."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    boundary = boundary_edges(mesh.faces)
-    if not len(boundary):
-        raise ValueError("the garment has no boundary to attach to the body")
-    n = mesh.num_vertices
-    graph = coo_matrix((np.ones(len(boundary)), (boundary[:, 0], boundary[:, 1])), shape=(n, n))
-    _, label = connected_components(graph, directed=False)
-    on_boundary = np.unique(boundary)
-    loops = {k: on_boundary[label[on_boundary] == k] for k in np.unique(label[on_boundary])}
-    return max(loops.values(), key=lambda loop: mesh.vertices[loop, 2].mean())
-
-
 def fit_shipped_garment(name: str, body: BodyModel, shape: torch.Tensor) -> Garment:
     """A shipped garment carried onto ``body`` with ``shape``, in its rest pose.
 
@@ -97,9 +80,4 @@ def fit_shipped_garment(name: str, body: BodyModel, shape: torch.Tensor) -> Garm
     # bodies' different origins cancel.
     embedding = embed_points(garment.vertices, hm08, faces)
     fitted = as_mesh(evaluate_embedding(embedding, rest, faces), garment.faces)
-    pinned = top_boundary_loop(fitted)
-    indices, weights = body.skinning()
-    skin_indices, skin_weights = transfer_skinning(fitted.vertices, pinned, rest, body.joint_names,
-                                                   indices.numpy(), weights.numpy())
-    fit = signed_distance_to_surface(fitted.vertices, rest, faces)
-    return Garment(f"makehuman-{name}", fitted, pinned, skin_indices, skin_weights, fit)
+    return garment_on_body(f"makehuman-{name}", fitted, body, shape)
