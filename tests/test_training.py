@@ -184,3 +184,14 @@ def test_checkpoints_follow_the_run_folder():
                     run=False)
     assert cli.trainer.checkpoint_callback.dirpath.endswith('runs/ablations/alpha1/checkpoints')
     assert cli.model.estimator.detail.input_maps.alpha == 1.0
+
+
+@pytest.mark.slow
+def test_compiled_estimator_gives_the_same_predictions(tiny_windows):
+    from swingar_pyg.training import SwinGarModule
+
+    estimator = SwinGarEstimator(**SMALL_ESTIMATOR)
+    plain, compiled = SwinGarModule(estimator), SwinGarModule(estimator, compile=True)
+    batch = next(iter(tiny_windows.test_dataloader()))
+    with torch.no_grad():
+        assert torch.allclose(plain(batch).vertices, compiled(batch).vertices, atol=1e-5)

@@ -39,6 +39,7 @@ from typing import TYPE_CHECKING
 import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
+from torch_geometric.utils import add_remaining_self_loops
 
 from swingar_pyg.models.pose_features import pose_feature_size
 from swingar_pyg.nn import FCALSTM, FCAConv, attention_edge_index
@@ -161,7 +162,10 @@ class SwinGarEstimator(nn.Module):
     def encode_garment(self, data) -> tuple[Tensor, Tensor, Tensor]:
         """The motion-independent part: attention graph, :math:`M_g` features
         ``(N, C)`` and the shape code per vertex ``(N, C)``."""
-        edge_index = attention_edge_index(data.edge_index, data.num_nodes)
+        if torch.compiler.is_compiling():  # EdgeIndex does not trace: a plain tensor
+            edge_index, _ = add_remaining_self_loops(data.edge_index, num_nodes=data.num_nodes)
+        else:
+            edge_index = attention_edge_index(data.edge_index, data.num_nodes)
         x = torch.cat([data.normal, data.rest, data.fit.unsqueeze(-1)], dim=-1)
         features = self.garment_encoder(x, edge_index)
         if self.shape_parser is None:
