@@ -191,6 +191,8 @@ def build_parser() -> argparse.ArgumentParser:
     predict.add_argument("--seconds", type=float, default=None)
     predict.add_argument("--out", default="runs/predict")
     predict.add_argument("--no-preview", dest="preview", action="store_false")
+    predict.add_argument("--no-collisions", dest="collisions", action="store_false",
+                         help="keep vertices the estimator put inside the body")
     predict.set_defaults(run=_predict)
 
     quickstart = commands.add_parser(
@@ -205,10 +207,16 @@ def _predict(args: argparse.Namespace) -> int:
     from swingar_pyg.prediction import predict_to_folder
 
     summary = predict_to_folder(args.ckpt, args.garment, args.motion, args.out,
-                                args.body_shape, args.seconds, args.preview)
+                                args.body_shape, args.seconds, args.preview,
+                                collisions=args.collisions)
     print(f"{summary['garment']} ({summary['vertices']} vertices) on {summary['motion']}: "
           f"{summary['frames']} frames at {summary['ms_per_frame_median']:.1f} ms/frame "
           f"-> {args.out}")
+    if summary["collisions"]:
+        counts = summary["collisions"]
+        print(f"collisions: moved {counts['moved']} vertex-frames out of the body; inside "
+              f"before {counts['inside_before']}, after {counts['inside_after']} (of "
+              f"{counts['vertex_frames']})")
     return 0
 
 

@@ -97,13 +97,41 @@ def write_obj(path: Path, vertices: np.ndarray, faces: np.ndarray) -> None:
         tmp.write_text("\n".join(lines) + "\n")
 
 
+def correct_collisions(vertices: np.ndarray, edge_index: torch.Tensor,
+                       body_vertices: torch.Tensor, body_faces: torch.Tensor,
+                       progress: bool = True) -> tuple[np.ndarray, dict]:
+    """Moves garment vertices out of the posed body, frame by frame, with the
+    exact body SDF (:func:`~swingar_pyg.collision.resolve_collisions`); returns
+    the corrected frames and counts of vertices inside before and after."""
+    from swingar_pyg.collision import exact_signed_distance, resolve_collisions
+
+    frames = range(len(vertices))
+    if progress:
+        from tqdm import tqdm
+
+        frames = tqdm(frames, desc="collisions", unit="frame")
+    out, moved, before, after = vertices.copy(), 0, 0, 0
+    for t in frames:
+        signed_distance = exact_signed_distance(body_vertices[t], body_faces)
+        x = torch.as_tensor(vertices[t], dtype=torch.float64)
+        before += int((signed_distance(x)[0] > 0).sum())
+        result = resolve_collisions(x, edge_index, signed_distance)
+        after += int((signed_distance(result.vertices)[0] > 0).sum())
+        moved += int(result.moved.sum())
+        out[t] = result.vertices.numpy()
+    return out, {"inside_before": before, "inside_after": after, "moved": moved,
+                 "vertex_frames": int(vertices.shape[0] * vertices.shape[1])}
+
+
 def predict_to_folder(checkpoint: str, garment: str, motion: str, out: str | Path,
                       body_shape: list[float] | None = None, seconds: float | None = None,
-                      preview: bool = True, progress: bool = True) -> dict:
+                      preview: bool = True, progress: bool = True,
+                      collisions: bool = True) -> dict:
     """Animates ``garment`` (a mesh file or a shipped garment name) on ``motion``
     (a procedural family, a shipped clip or a ``.bvh`` path) and writes to
     ``out``: ``frames/frame_0000.obj`` …, ``garment.npz`` (all frames, faces,
-    body shape, per-frame seconds), ``preview.gif`` and ``summary.json``."""
+    body shape, per-frame seconds), ``preview.gif`` and ``summary.json``. With
+    ``collisions``, vertices inside the body are moved out (exact body SDF)."""
     from swingar_pyg.world.body import AnnyBody
     from swingar_pyg.world.motion_library import make_motion
 
@@ -122,6 +150,10 @@ def predict_to_folder(checkpoint: str, garment: str, motion: str, out: str | Pat
     if not np.isfinite(vertices).all():
         raise ValueError("the estimator produced non-finite vertices; the checkpoint or the "
                          "inputs are broken")
+    collision_counts = None
+    if collisions:
+        vertices, collision_counts = correct_collisions(vertices, graph.edge_index,
+                                                        posed.vertices, body.faces, progress)
     out = Path(out)
     faces = fitted.mesh.faces
     for t, frame in enumerate(vertices):
@@ -140,7 +172,7 @@ def predict_to_folder(checkpoint: str, garment: str, motion: str, out: str | Pat
                "motion": clip.name, "frames": int(len(vertices)),
                "ms_per_frame_median": 1e3 * float(np.median(frame_seconds[1:]))
                if len(frame_seconds) > 1 else 1e3 * float(frame_seconds[0]),
-               "checkpoint": str(checkpoint)}
+               "checkpoint": str(checkpoint), "collisions": collision_counts}
     with atomic_path(out / "summary.json") as tmp:
         tmp.write_text(json.dumps(summary, indent=2))
     return summary

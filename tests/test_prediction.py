@@ -46,6 +46,9 @@ def test_predict_animates_a_garment_of_unseen_topology_from_an_obj(checkpoint, t
     assert len(list((out / 'frames').glob('*.obj'))) == 15 and (out / 'preview.gif').exists()
     summary = json.loads((out / 'summary.json').read_text())
     assert summary['vertices'] == skirt.mesh.num_vertices
+    counts = summary['collisions']
+    assert counts['inside_after'] <= counts['inside_before']
+    assert counts['inside_after'] <= 0.005 * counts['vertex_frames']
     # near the body: no vertex farther from the posed body than 10 cm beyond the
     # farthest it stands at rest (a flared hem stands well off the legs)
     from swingar_pyg.world.motion_library import make_motion
