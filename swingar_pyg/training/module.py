@@ -7,10 +7,9 @@ import lightning as L
 import torch
 from lightning.pytorch.core.mixins.hparams_mixin import _given_hyperparameters
 
-from swingar_pyg.models import SwinGarEstimator, losses
+from swingar_pyg.models import EstimatorOutput, SwinGarEstimator, losses
 from swingar_pyg.models.estimator import TARGET_FRAMES
 from swingar_pyg.training.vertex_errors import VertexErrors
-
 
 
 def garment_family(name: str) -> str:
