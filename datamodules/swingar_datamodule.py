@@ -3,6 +3,7 @@ of disjoint garment graphs."""
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import lightning as L
@@ -77,6 +78,7 @@ class SwinGarDataModule(L.LightningDataModule):
 
             make_dataset(DatasetConfig.from_yaml(self.hparams.config), self.root,
                          workers=self.hparams.generation_workers)
+        _warn_if_stale(self.split_path(s) for s in SPLITS)
         body = None
         for split in SPLITS:
             if body is None and not _cache_current(self.split_path(split), self.settings):
@@ -116,6 +118,18 @@ class SwinGarDataModule(L.LightningDataModule):
 
     def predict_dataloader(self) -> DataLoader:
         return self._loader("test")
+
+
+def _warn_if_stale(paths) -> None:
+    from swingar_pyg.sim import SIMULATOR_REVISION
+    from swingar_pyg.world.sequence_file import simulator_revisions
+
+    for path in paths:
+        older = sorted(r for r in simulator_revisions(path) if r != SIMULATOR_REVISION)
+        if older:
+            warnings.warn(f"{path} holds sequences from simulator revision(s) {older}, this code "
+                          f"simulates revision {SIMULATOR_REVISION}; delete the dataset folder "
+                          "to regenerate it with the current simulator", stacklevel=3)
 
 
 def _cache_current(path: Path, settings: FeatureSettings) -> bool:

@@ -195,3 +195,22 @@ def test_compiled_estimator_gives_the_same_predictions(tiny_windows):
     batch = next(iter(tiny_windows.test_dataloader()))
     with torch.no_grad():
         assert torch.allclose(plain(batch).vertices, compiled(batch).vertices, atol=1e-5)
+
+
+def test_datamodule_warns_about_sequences_from_an_older_simulator(tiny_windows, tmp_path):
+    import h5py
+
+    from datamodules import SwinGarDataModule
+    from swingar_pyg.sim import SIMULATOR_REVISION
+
+    for split in ('train', 'val', 'test'):
+        shutil.copyfile(tiny_windows.split_path(split), tmp_path / f'{split}.h5')
+    module = SwinGarDataModule(config=tiny_windows.hparams.config, root=str(tmp_path),
+                               **SMALL_FEATURES)
+    module.prepare_data()  # current revision everywhere: silent (warnings are errors here)
+    with h5py.File(tmp_path / 'val.h5', 'a') as file:
+        assert {int(g.attrs['simulator_revision'])
+                for g in file['sequences'].values()} == {SIMULATOR_REVISION}
+        del next(iter(file['sequences'].values())).attrs['simulator_revision']
+    with pytest.warns(UserWarning, match=r'simulator revision\(s\) \[0\]'):
+        module.prepare_data()

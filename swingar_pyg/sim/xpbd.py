@@ -35,6 +35,10 @@ from swingar_pyg.sim.constraints import (
     stretch_pairs,
 )
 
+# Raise whenever a change alters simulated positions: dataset files record it, and the
+# datamodule warns when it trains on sequences an older simulator made.
+SIMULATOR_REVISION = 3
+
 
 @dataclass(frozen=True)
 class XPBDSettings:

@@ -8,7 +8,8 @@ Layout::
                       rigid_vertices (T,N,3) rotations (T,J,3,3) translation (T,3)
                       body_shape (S,) seconds_per_frame max_stretch mean_stretch
                       penetration (T,)
-                      attrs: garment, motion, fps, joint_names, settings (JSON)
+                      attrs: garment, motion, fps, joint_names, settings (JSON),
+                             simulator_revision (absent in files older than it)
 
 Body vertices are not stored: the body model recomputes them from shape and pose.
 """
@@ -21,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from swingar_pyg.atomic import atomic_path
+from swingar_pyg.sim import SIMULATOR_REVISION
 from swingar_pyg.world.sequence import SimulatedSequence
 
 _COMPRESSION = {"compression": "gzip", "compression_opts": 4}
@@ -65,6 +67,7 @@ def write_sequences(path: str | Path, sequences: list[SimulatedSequence],
                 group.attrs["fps"] = sequence.motion.fps
                 group.attrs["joint_names"] = json.dumps(list(sequence.motion.joint_names))
                 group.attrs["settings"] = json.dumps(result.settings)
+                group.attrs["simulator_revision"] = SIMULATOR_REVISION
     return path
 
 
@@ -106,3 +109,13 @@ def read_sequence(path: str | Path, sequence_id: str) -> dict:
                    joint_names=tuple(json.loads(group.attrs["joint_names"])),
                    faces=file[f"garments/{group.attrs['garment']}/faces"][:])
     return out
+
+
+def simulator_revisions(path: str | Path) -> set[int]:
+    """The simulator revisions that made the sequences of a file (0 for
+    sequences written before revisions were recorded)."""
+    import h5py
+
+    with h5py.File(path, "r") as file:
+        return {int(group.attrs.get("simulator_revision", 0))
+                for group in file.get("sequences", {}).values()}
