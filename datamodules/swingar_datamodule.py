@@ -127,9 +127,10 @@ def _warn_if_stale(paths) -> None:
     for path in paths:
         older = sorted(r for r in simulator_revisions(path) if r != SIMULATOR_REVISION)
         if older:
-            warnings.warn(f"{path} holds sequences from simulator revision(s) {older}, this code "
-                          f"simulates revision {SIMULATOR_REVISION}; delete the dataset folder "
-                          "to regenerate it with the current simulator", stacklevel=3)
+            warnings.warn(f"{path} holds sequences from simulator revision(s) {older} (0: made "
+                          f"before revisions were recorded), this code simulates revision "
+                          f"{SIMULATOR_REVISION}; delete the dataset folder to regenerate it "
+                          "with the current simulator", stacklevel=3)
 
 
 def _cache_current(path: Path, settings: FeatureSettings) -> bool:
