@@ -124,21 +124,20 @@ def _bar(items, description: str, progress: bool):
 
 
 def _cache_garments(file, cache, settings: FeatureSettings, progress: bool) -> None:
-    from swingar_pyg.geometry import as_mesh, mesh_edge_index, spectral_descriptor, vertex_normals
+    from swingar_pyg.geometry import as_mesh
+    from swingar_pyg.models.garment_window import garment_graph_features
 
     for name in _bar(list(file["garments"]), "garment features", progress):
         source = file[f"garments/{name}"]
         mesh = as_mesh(source["rest_vertices"][:].astype(np.float64), source["faces"][:])
+        features = garment_graph_features(mesh, settings.descriptor_size, settings.sigma,
+                                          settings.seed, settings.weighting)
         group = cache.create_group(f"garments/{name}")
-        group["edge_index"] = mesh_edge_index(mesh).numpy().astype(np.int64)
-        group["normals"] = vertex_normals(torch.as_tensor(mesh.vertices),
-                                          torch.as_tensor(mesh.faces)).numpy().astype(np.float32)
-        if settings.descriptor_size is not None:
-            descriptor = spectral_descriptor(mesh, z=settings.descriptor_size,
-                                             sigma=settings.sigma, normalize=True,
-                                             weighting=settings.weighting, seed=settings.seed)
-            group["descriptor"] = descriptor.eigenvalues.astype(np.float32)
-            group.attrs["valid_eigenvalues"] = descriptor.num_valid
+        group["edge_index"] = features["edge_index"].numpy().astype(np.int64)
+        group["normals"] = features["normal"].numpy()
+        if "descriptor" in features:
+            group["descriptor"] = features["descriptor"].numpy()
+            group.attrs["valid_eigenvalues"] = features["num_valid"]
 
 
 def _cache_sequences(file, cache, settings: FeatureSettings, body_model,

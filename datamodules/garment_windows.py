@@ -16,6 +16,7 @@ from torch.utils.data import Dataset
 from datamodules.feature_cache import FeatureSettings, cached_settings
 from swingar_pyg.models import GarmentWindow, pose_window
 from swingar_pyg.models.estimator import TARGET_FRAMES
+from swingar_pyg.models.garment_window import dense_skinning_weights
 
 
 @dataclass
@@ -42,13 +43,6 @@ class _Sequence:
     joint_transforms: Tensor
     joint_positions: Tensor
     body: dict[str, Tensor]
-
-
-def _dense_weights(indices: np.ndarray, weights: np.ndarray, joints: int) -> Tensor:
-    dense = torch.zeros(len(indices), joints)
-    dense.scatter_add_(1, torch.as_tensor(indices.astype(np.int64)),
-                       torch.as_tensor(weights, dtype=torch.float32))
-    return dense
 
 
 class GarmentWindowDataset(Dataset):
@@ -89,8 +83,8 @@ class GarmentWindowDataset(Dataset):
             rest=torch.as_tensor(source["rest_vertices"][:]),
             normal=torch.as_tensor(cache["normals"][:]),
             fit=torch.as_tensor(source["fit"][:]),
-            prior_weights=_dense_weights(source["skin_indices"][:], source["skin_weights"][:],
-                                         joints),
+            prior_weights=dense_skinning_weights(source["skin_indices"][:],
+                                                 source["skin_weights"][:], joints),
             edge_index=torch.as_tensor(cache["edge_index"][:]),
             descriptor=None if descriptor is None else torch.as_tensor(descriptor))
 

@@ -79,13 +79,8 @@ class SwinGarDataModule(L.LightningDataModule):
             make_dataset(DatasetConfig.from_yaml(self.hparams.config), self.root,
                          workers=self.hparams.generation_workers)
         _warn_if_stale(self.split_path(s) for s in SPLITS)
-        body = None
         for split in SPLITS:
-            if body is None and not _cache_current(self.split_path(split), self.settings):
-                from swingar_pyg.world.body import AnnyBody
-
-                body = AnnyBody()
-            ensure_feature_cache(self.split_path(split), self.settings, body)
+            ensure_feature_cache(self.split_path(split), self.settings)
 
     def setup(self, stage: str | None = None) -> None:
         wanted = {"fit": ("train", "val"), "validate": ("val",), "test": ("test",),
@@ -132,8 +127,3 @@ def _warn_if_stale(paths) -> None:
                           f"{SIMULATOR_REVISION}; delete the dataset folder to regenerate it "
                           "with the current simulator", stacklevel=3)
 
-
-def _cache_current(path: Path, settings: FeatureSettings) -> bool:
-    from datamodules.feature_cache import cached_settings
-
-    return cached_settings(path) == settings

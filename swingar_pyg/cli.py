@@ -7,6 +7,9 @@ import sys
 
 from swingar_pyg import __version__
 
+# Subcommands handed to Lightning's CLI (swingar_pyg.training.cli), imported only then.
+LIGHTNING_COMMANDS = ("fit", "validate", "test", "predict")
+
 
 def _demo(args: argparse.Namespace) -> int:
     from swingar_pyg.demo import run_demo
@@ -230,7 +233,7 @@ def _quickstart(args: argparse.Namespace) -> int:
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     exporting = argv[:1] == ["predict"] and any(a.startswith("--garment") for a in argv)
-    if argv and argv[0] in ("fit", "validate", "test", "predict") and not exporting:
+    if argv and argv[0] in LIGHTNING_COMMANDS and not exporting:
         from swingar_pyg.training.cli import build_cli
 
         build_cli(argv)

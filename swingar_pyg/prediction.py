@@ -18,30 +18,25 @@ import torch
 
 from swingar_pyg.atomic import atomic_path
 from swingar_pyg.models import GarmentWindow, SwinGarEstimator
+from swingar_pyg.models.garment_window import dense_skinning_weights, garment_graph_features
 
 
 def garment_graph(garment, num_joints: int, descriptor_size: int | None,
                   sigma: float = 0.1, seed: int = 0) -> GarmentWindow:
     """The estimator's garment inputs (``rest``, ``normal``, ``fit``,
     ``prior_weights``, ``edge_index``, ``descriptor``) for a
-    :class:`~swingar_pyg.world.garment.Garment`."""
-    from swingar_pyg.geometry import mesh_edge_index, spectral_descriptor, vertex_normals
-
+    :class:`~swingar_pyg.world.garment.Garment`, computed as the datamodule's
+    feature cache computes them."""
     mesh = garment.mesh
-    rest = torch.as_tensor(mesh.vertices, dtype=torch.float32)
-    prior = torch.zeros(mesh.num_vertices, num_joints)
-    prior.scatter_add_(1, torch.as_tensor(garment.skin_indices, dtype=torch.long),
-                       torch.as_tensor(garment.skin_weights, dtype=torch.float32))
+    features = garment_graph_features(mesh, descriptor_size, sigma, seed)
     graph = GarmentWindow(
-        rest=rest,
-        normal=vertex_normals(torch.as_tensor(mesh.vertices),
-                              torch.as_tensor(mesh.faces)).float(),
-        fit=torch.as_tensor(garment.fit, dtype=torch.float32), prior_weights=prior,
-        edge_index=mesh_edge_index(mesh), num_nodes=mesh.num_vertices)
-    if descriptor_size is not None:
-        descriptor = spectral_descriptor(mesh, z=descriptor_size, sigma=sigma, normalize=True,
-                                         seed=seed)
-        graph.descriptor = torch.as_tensor(descriptor.eigenvalues, dtype=torch.float32)[None]
+        rest=torch.as_tensor(mesh.vertices, dtype=torch.float32), normal=features["normal"],
+        fit=torch.as_tensor(garment.fit, dtype=torch.float32),
+        prior_weights=dense_skinning_weights(garment.skin_indices, garment.skin_weights,
+                                             num_joints),
+        edge_index=features["edge_index"], num_nodes=mesh.num_vertices)
+    if "descriptor" in features:
+        graph.descriptor = features["descriptor"][None]
     return graph
 
 

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 from typing import Any
 
+import torch
+from torch import Tensor
 from torch_geometric.data import Data
 
 # Graph-level tensors carry a leading dimension of 1 per garment, so that a
@@ -45,3 +47,32 @@ class GarmentWindow(Data):
         if key in GRAPH_LEVEL:
             return 0
         return super().__cat_dim__(key, value, *args, **kwargs)
+
+
+def dense_skinning_weights(indices, weights, num_joints: int) -> Tensor:
+    """``(N, K)`` joint indices and weights (numpy or torch) as dense ``(N, J)``
+    weights, the estimator's ``prior_weights``."""
+    indices = torch.as_tensor(indices).long()
+    dense = torch.zeros(len(indices), num_joints)
+    return dense.scatter_add_(1, indices, torch.as_tensor(weights, dtype=torch.float32))
+
+
+def garment_graph_features(mesh, descriptor_size: int | None, sigma: float = 0.1,
+                           seed: int = 0, weighting: str = "voronoi") -> dict[str, Any]:
+    """What the estimator needs of a rest garment mesh beyond its vertices:
+    ``edge_index`` (mesh edges, both ways), unit ``normal`` ``(N, 3)`` and, unless
+    ``descriptor_size`` is ``None``, the ``descriptor`` (eigenvalues of ``A / N``,
+    :func:`~swingar_pyg.geometry.spectral_descriptor` with ``normalize=True``)
+    with its ``num_valid`` entries."""
+    from swingar_pyg.geometry import mesh_edge_index, spectral_descriptor, vertex_normals
+
+    features: dict[str, Any] = {
+        "edge_index": mesh_edge_index(mesh),
+        "normal": vertex_normals(torch.as_tensor(mesh.vertices),
+                                 torch.as_tensor(mesh.faces)).float()}
+    if descriptor_size is not None:
+        descriptor = spectral_descriptor(mesh, z=descriptor_size, sigma=sigma, normalize=True,
+                                         weighting=weighting, seed=seed)
+        features["descriptor"] = torch.as_tensor(descriptor.eigenvalues, dtype=torch.float32)
+        features["num_valid"] = descriptor.num_valid
+    return features

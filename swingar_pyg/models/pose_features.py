@@ -30,6 +30,8 @@ import math
 import torch
 from torch import Tensor
 
+from swingar_pyg.geometry.skinning import axis_angle_to_matrix
+
 
 def pose_feature_size(num_joints: int) -> int:
     """Length of one frame's feature vector for a rig of ``num_joints`` joints."""
@@ -51,11 +53,8 @@ def heading_angle(root_rotation: Tensor) -> Tensor:
 def heading_rotation(root_rotation: Tensor) -> Tensor:
     """The rotation about +Z by :func:`heading_angle`; ``(..., 3, 3)``."""
     angle = heading_angle(root_rotation)
-    sin, cos = torch.sin(angle), torch.cos(angle)
-    zero, one = torch.zeros_like(sin), torch.ones_like(sin)
-    return torch.stack([torch.stack([cos, -sin, zero], -1),
-                        torch.stack([sin, cos, zero], -1),
-                        torch.stack([zero, zero, one], -1)], -2)
+    zero = torch.zeros_like(angle)
+    return axis_angle_to_matrix(torch.stack([zero, zero, angle], dim=-1))
 
 
 def pose_window(rotations: Tensor, translation: Tensor, fps: float, end: int,

@@ -13,8 +13,6 @@ from lightning.pytorch.cli import LightningArgumentParser, LightningCLI
 from datamodules import SwinGarDataModule
 from swingar_pyg.training.module import SwinGarModule
 
-LIGHTNING_COMMANDS = ("fit", "validate", "test", "predict")
-
 
 class SwinGarCLI(LightningCLI):
     """Adds a ``checkpoint:`` section (a :class:`ModelCheckpoint`) whose folder

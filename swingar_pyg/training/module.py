@@ -12,11 +12,6 @@ from swingar_pyg.models.estimator import TARGET_FRAMES
 from swingar_pyg.training.vertex_errors import VertexErrors
 
 
-def garment_family(name: str) -> str:
-    """``"skirt-l0.45-...@shape0"`` → ``"skirt"``."""
-    return name.split("-", 1)[0]
-
-
 class SwinGarModule(L.LightningModule):
     r"""Trains a :class:`SwinGarEstimator` on :class:`GarmentWindow` batches.
 
@@ -97,13 +92,10 @@ class SwinGarModule(L.LightningModule):
             self.log(f"{stage}/loss_{name}", value, batch_size=size)
         if stage != "train":
             newest = batch.target[:, -1]
-            families = [garment_family(g) for g in batch.garment]
             for method, vertices in (("estimator", prediction[-1]),
                                      ("rigid", batch.rigid[:, -1])):
                 errors = 1e3 * (vertices - newest).norm(dim=-1)
                 self.errors.add(method, errors, batch.batch, list(batch.garment),
-                                list(batch.motion))
-                self.errors.add(f"{method}@family", errors, batch.batch, families,
                                 list(batch.motion))
         return loss
 
@@ -127,8 +119,8 @@ class SwinGarModule(L.LightningModule):
         for method in ("estimator", "rigid"):
             for key, value in self.last_summary[method]["all"].items():
                 self.log(f"{stage}/{method}_{key}", value, sync_dist=True)
-            for group, stats in self.last_summary[f"{method}@family"].items():
-                if group.startswith("garment:"):
+            for group, stats in self.last_summary[method].items():
+                if group.startswith("family:"):
                     family = group.split(":", 1)[1]
                     self.log(f"{stage}/{family}/{method}_mean_mm", stats["mean_mm"],
                              sync_dist=True)

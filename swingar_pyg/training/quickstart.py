@@ -21,14 +21,14 @@ from swingar_pyg.atomic import atomic_path
 def _time_estimator(estimator, dataset, progress: bool) -> dict[str, float]:
     """Median ms per streamed frame per test garment, and the overall median."""
     per_garment: dict[str, list[float]] = {}
-    sequences = dataset.sequences
+    sequences = enumerate(dataset.sequences)
     if progress:
         from tqdm import tqdm
 
-        sequences = tqdm(sequences, desc="estimator (streaming)", unit="sequence")
-    for sequence in sequences:
-        first = dataset.windows.index(next(w for w in dataset.windows
-                                           if dataset.sequences[w[0]] is sequence))
+        sequences = tqdm(sequences, total=len(dataset.sequences), desc="estimator (streaming)",
+                         unit="sequence")
+    for index, sequence in sequences:
+        first = dataset.windows.index((index, 0))
         stream = estimator.stream(dataset[first], sequence.body_shape, sequence.fps)
         times = []
         for t in range(len(sequence.target)):
@@ -41,32 +41,38 @@ def _time_estimator(estimator, dataset, progress: bool) -> dict[str, float]:
 
 
 def _time_simulator(path: Path, sequence_ids: list[str], progress: bool) -> dict[str, float]:
-    """Re-simulates sequences of a split file; median ms per frame per garment."""
+    """Re-simulates sequences of a split file with the settings that made them;
+    median ms per frame per garment."""
     import h5py
 
     from swingar_pyg.geometry import as_mesh
-    from swingar_pyg.sim import BodyCollider, XPBDCloth, XPBDSettings
+    from swingar_pyg.sim import XPBDSettings
     from swingar_pyg.world.body import AnnyBody
+    from swingar_pyg.world.garment import Garment
+    from swingar_pyg.world.motion import Motion
+    from swingar_pyg.world.sequence import simulate_sequence
 
     body = AnnyBody()
     out = {}
     for sequence_id in sequence_ids:
         with h5py.File(path, "r") as file:
             group = file[f"sequences/{sequence_id}"]
-            garment = file[f"garments/{group.attrs['garment']}"]
-            mesh = as_mesh(garment["rest_vertices"][:].astype(np.float64), garment["faces"][:])
-            pinned = garment["pinned"][:].astype(np.int64)
-            rigid = torch.as_tensor(group["rigid_vertices"][:])
-            settings = json.loads(group.attrs["settings"])
-            settings["gravity"] = tuple(settings["gravity"])
-            posed = body.pose(torch.as_tensor(group["body_shape"][:]),
-                              torch.as_tensor(group["rotations"][:]),
-                              torch.as_tensor(group["translation"][:]))
             name = str(group.attrs["garment"])
-        settings = XPBDSettings(**settings)
-        cloth = XPBDCloth(mesh, pinned, settings)
-        collider = BodyCollider(posed.vertices, body.faces, thickness=settings.thickness)
-        result = cloth.simulate(rigid[0], rigid[:, pinned], collider, progress=progress)
+            stored = file[f"garments/{name}"]
+            garment = Garment(name, as_mesh(stored["rest_vertices"][:].astype(np.float64),
+                                            stored["faces"][:]),
+                              stored["pinned"][:].astype(np.int64),
+                              stored["skin_indices"][:].astype(np.int64),
+                              stored["skin_weights"][:], stored["fit"][:])
+            fps = float(group.attrs["fps"])
+            motion = Motion(str(group.attrs["motion"]), torch.as_tensor(group["rotations"][:]),
+                            torch.as_tensor(group["translation"][:]), fps,
+                            tuple(json.loads(group.attrs["joint_names"])))
+            settings = json.loads(group.attrs["settings"])
+            shape = torch.as_tensor(group["body_shape"][:])
+        settings = XPBDSettings(**{**settings, "gravity": tuple(settings["gravity"])})
+        result = simulate_sequence(body, shape, garment, motion, settings,
+                                   progress=progress).result
         out[name] = 1e3 * float(np.median(result.seconds_per_frame))
     return out
 

@@ -8,6 +8,11 @@ import torch
 from torch import Tensor
 
 
+def garment_family(name: str) -> str:
+    """``"skirt-l0.45-...@shape0"`` → ``"skirt"``."""
+    return name.split("-", 1)[0]
+
+
 def error_stats(errors_mm: Tensor) -> dict[str, float]:
     """Mean, RMSE and 95th percentile of per-vertex errors (mm)."""
     errors = errors_mm.double()
@@ -40,7 +45,8 @@ class VertexErrors:
         return bool(self._errors)
 
     def summary(self) -> dict[str, dict[str, dict[str, float]]]:
-        """``{method: {"all" | "garment:<name>" | "motion:<name>": stats}}``."""
+        """``{method: {"all" | "garment:<name>" | "family:<family>" | "motion:<name>":
+        stats}}``, the family being :func:`garment_family` of the garment's name."""
         out = {}
         for method, pieces in self._errors.items():
             errors = torch.cat(pieces)
@@ -48,6 +54,7 @@ class VertexErrors:
             groups: dict[str, list[Tensor]] = defaultdict(list)
             for (garment, motion), part in zip(self._labels[method], pieces_per_window):
                 groups[f"garment:{garment}"].append(part)
+                groups[f"family:{garment_family(garment)}"].append(part)
                 groups[f"motion:{motion}"].append(part)
             out[method] = {"all": error_stats(errors)}
             out[method].update({k: error_stats(torch.cat(v)) for k, v in sorted(groups.items())})
