@@ -170,11 +170,25 @@ def test_configs_parse_and_ablations_change_only_their_knob(layers, expected, ca
     with pytest.raises(SystemExit):
         build_cli([*args, '--print_config'])
     config = yaml.safe_load(capsys.readouterr().out)
-    estimator = config['model']['estimator']['init_args']
+    assert config['model']['class_path'] == 'swingar_pyg.training.SwinGarModule'
+    estimator = config['model']['init_args']['estimator']['init_args']
     assert {k: estimator[k] for k in expected} == expected
-    assert config['data']['descriptor_size'] == estimator['descriptor_size']
+    assert config['data']['init_args']['descriptor_size'] == estimator['descriptor_size']
     if len(layers) > 1:
         assert config['trainer']['default_root_dir'].startswith('runs/ablations/')
+
+
+def test_the_body_sdf_config_parses_with_its_own_module(capsys):
+    import yaml
+
+    from swingar_pyg.training.cli import build_cli
+
+    with pytest.raises(SystemExit):
+        build_cli(['fit', '-c', 'configs/body_sdf.yaml', '--print_config'])
+    config = yaml.safe_load(capsys.readouterr().out)
+    assert config['model']['class_path'] == 'swingar_pyg.training.BodySDFModule'
+    assert config['data']['class_path'] == 'datamodules.BodySDFDataModule'
+    assert config['checkpoint']['monitor'] == 'val/near_mean_mm'
 
 
 def test_checkpoints_follow_the_run_folder():

@@ -7,11 +7,11 @@ import torch
 from swingar_pyg.geometry import signed_distance_to_surface, split_quads, vertex_normals
 from swingar_pyg.geometry.skinning import linear_blend_skinning
 from swingar_pyg.world.garment import SkirtSpec, fit_procedural_skirt, procedural_skirt
-from swingar_pyg.world.motion import PROCEDURAL_MOTIONS, procedural_motion
+from swingar_pyg.world.motion import EXTREME_MOTIONS, PROCEDURAL_MOTIONS, procedural_motion
 
 CMU_JOINTS = ('Hips', 'LHipJoint', 'LeftUpLeg', 'LeftLeg', 'LeftFoot', 'LowerBack', 'Spine',
               'Spine1', 'LeftArm', 'RHipJoint', 'RightUpLeg', 'RightLeg', 'RightFoot',
-              'RightArm')
+              'RightArm', 'LeftForeArm', 'RightForeArm')
 
 
 def cylinder_body(radius=0.15, bottom=-0.9, top=0.6, rings=40, segments=48):
@@ -27,7 +27,7 @@ def cylinder_body(radius=0.15, bottom=-0.9, top=0.6, rings=40, segments=48):
     return points, faces, np.zeros((len(points), 1), dtype=np.int64), np.ones((len(points), 1))
 
 
-@pytest.mark.parametrize('kind', PROCEDURAL_MOTIONS)
+@pytest.mark.parametrize('kind', PROCEDURAL_MOTIONS + EXTREME_MOTIONS)
 def test_procedural_motions_start_at_rest_and_are_rotations(kind):
     motion = procedural_motion(kind, CMU_JOINTS, seconds=2.0, fps=30)
     assert motion.rotations.shape == (60, len(CMU_JOINTS), 3, 3)
@@ -38,6 +38,18 @@ def test_procedural_motions_start_at_rest_and_are_rotations(kind):
     assert torch.allclose(r @ r.transpose(-1, -2), torch.eye(3).expand_as(r), atol=1e-5)
     assert torch.allclose(torch.linalg.det(r), torch.ones(r.shape[:2]), atol=1e-5)
     assert (r[1:] - r[:-1]).abs().max() > 0 or motion.translation.abs().max() > 0
+
+
+def test_extreme_motions_reach_extreme_angles():
+    def largest_angle(motion, joint):
+        r = motion.rotations[:, CMU_JOINTS.index(joint)]
+        cosine = ((r.diagonal(dim1=-2, dim2=-1).sum(-1) - 1) / 2).clamp(-1, 1)
+        return math.degrees(float(torch.arccos(cosine).max()))
+
+    split = procedural_motion('leg_split', CMU_JOINTS, seconds=4.0)
+    assert largest_angle(split, 'LeftUpLeg') > 95 and largest_angle(split, 'RightUpLeg') > 70
+    cross = procedural_motion('arm_cross', CMU_JOINTS, seconds=2.0)
+    assert largest_angle(cross, 'LeftArm') > 100
 
 
 def test_mirroring_twice_is_the_identity_and_swaps_sides():

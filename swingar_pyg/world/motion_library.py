@@ -11,6 +11,7 @@ import torch
 from swingar_pyg.world.body import BodyModel
 from swingar_pyg.world.bvh import read_bvh
 from swingar_pyg.world.motion import (
+    EXTREME_MOTIONS,
     PROCEDURAL_MOTIONS,
     Motion,
     ease_from_rest,
@@ -30,7 +31,8 @@ def make_motion(source: str, body: BodyModel, shape: torch.Tensor, seconds: floa
                 fps: float = 30.0, speed: float = 1.0, amplitude: float = 1.0,
                 mirror: bool = False) -> Motion:
     """A motion for ``body`` from ``source``: a procedural family (see
-    :data:`~swingar_pyg.world.motion.PROCEDURAL_MOTIONS`), a shipped clip name
+    :data:`~swingar_pyg.world.motion.PROCEDURAL_MOTIONS`, or a stress case of
+    :data:`~swingar_pyg.world.motion.EXTREME_MOTIONS`), a shipped clip name
     (:func:`shipped_clips`), or a path to a ``.bvh`` file.
 
     A clip's frame 0 is its reference pose (a T-pose for CMU), not motion: it is
@@ -39,7 +41,7 @@ def make_motion(source: str, body: BodyModel, shape: torch.Tensor, seconds: floa
     ``seconds`` (all of it if ``None`` or longer). ``speed`` plays it faster or
     slower; ``amplitude`` applies to procedural motions only.
     """
-    if source in PROCEDURAL_MOTIONS:
+    if source in PROCEDURAL_MOTIONS + EXTREME_MOTIONS:
         return procedural_motion(source, body.joint_names, seconds=seconds or 4.0, fps=fps,
                                  amplitude=amplitude, speed=speed, mirror=mirror)
     if amplitude != 1.0:
