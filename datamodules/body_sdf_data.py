@@ -135,31 +135,51 @@ def _frames(body, shape, rotations, translation, chosen, count, settings, rng, e
     return out
 
 
-def _run_job(job: _Job, settings: SDFSampleSettings) -> tuple[dict, list[str]]:
-    import h5py
+def sample_motion_frames(body, shape: tuple[float, ...], motions: tuple[str, ...],
+                         settings: SDFSampleSettings,
+                         rng: np.random.Generator) -> tuple[dict, list[str]]:
+    """Samples of ``settings.frames_per_motion`` random frames of each motion
+    source on ``body`` with ``shape``: arrays of :data:`FIELDS` and the motion
+    name of each frame."""
     import torch
 
-    from swingar_pyg.world.body import AnnyBody
-    from swingar_pyg.world.motion import PROCEDURAL_MOTIONS
+    from swingar_pyg.world.motion import EXTREME_MOTIONS, PROCEDURAL_MOTIONS
     from swingar_pyg.world.motion_library import make_motion
 
-    torch.set_num_threads(1)
-    body = AnnyBody()
-    rng = np.random.default_rng(job.seed)
-    shape = torch.tensor(job.shape)
     pieces, names = [], []
-    for source in job.motions:
-        amplitude = float(rng.uniform(*settings.amplitudes)) if source in PROCEDURAL_MOTIONS \
-            else 1.0
-        motion = make_motion(source, body, shape, seconds=settings.seconds, amplitude=amplitude)
+    for source in motions:
+        amplitude = float(rng.uniform(*settings.amplitudes)) \
+            if source in PROCEDURAL_MOTIONS + EXTREME_MOTIONS else 1.0
+        motion = make_motion(source, body, torch.tensor(shape), seconds=settings.seconds,
+                             amplitude=amplitude)
         # Past the ease-in from the rest pose: frames of the motion itself.
         start = min(round(0.5 * motion.fps), motion.num_frames - 1)
         chosen = rng.choice(np.arange(start, motion.num_frames),
                             min(settings.frames_per_motion, motion.num_frames - start),
                             replace=False)
-        pieces.append(_frames(body, job.shape, motion.rotations, motion.translation, chosen,
+        pieces.append(_frames(body, shape, motion.rotations, motion.translation, chosen,
                               settings.points_per_frame, settings, rng))
         names += [motion.name] * len(chosen)
+    return _join(pieces), names
+
+
+def _join(pieces: list[dict]) -> dict:
+    return {name: np.stack([x for piece in pieces for x in piece[name]]) for name in FIELDS}
+
+
+def _run_job(job: _Job, settings: SDFSampleSettings) -> tuple[dict, list[str]]:
+    import h5py
+    import torch
+
+    from swingar_pyg.world.body import AnnyBody
+
+    torch.set_num_threads(1)
+    body = AnnyBody()
+    rng = np.random.default_rng(job.seed)
+    pieces, names = [], []
+    if job.motions:
+        sampled, names = sample_motion_frames(body, job.shape, job.motions, settings, rng)
+        pieces.append({name: list(sampled[name]) for name in FIELDS})
     for path, sequence_id, frames in job.garment_frames:
         with h5py.File(path, "r") as file:
             group = file[f"sequences/{sequence_id}"]
@@ -174,8 +194,7 @@ def _run_job(job: _Job, settings: SDFSampleSettings) -> tuple[dict, list[str]]:
         pieces.append(_frames(body, job.shape, rotations, translation, np.asarray(frames),
                               settings.points_per_frame, settings, rng, extra))
         names += [f"{motion}@{Path(path).stem}:{sequence_id}"] * len(frames)
-    joined = {name: np.stack([x for piece in pieces for x in piece[name]]) for name in FIELDS}
-    return joined, names
+    return _join(pieces), names
 
 
 def _shape_rows(count: int, rng: np.random.Generator) -> list[tuple[float, ...]]:
@@ -199,13 +218,18 @@ def plan_jobs(settings: SDFSampleSettings, split: str) -> list[_Job]:
     return jobs
 
 
+def _shape_key(shape: tuple[float, ...]) -> tuple[float, ...]:
+    return tuple(round(v, 6) for v in shape)
+
+
 def _assign_garment_frames(jobs: list[_Job], settings: SDFSampleSettings,
                            rng: np.random.Generator) -> None:
     import h5py
 
     from swingar_pyg.world.dataset import DatasetConfig, make_dataset
 
-    by_shape = {job.shape: job for job in jobs}
+    # Shapes stored in float32 match the config's by value, not bit for bit.
+    by_shape = {_shape_key(job.shape): job for job in jobs}
     for config_path in settings.garment_datasets:
         config = DatasetConfig.from_yaml(config_path)
         path = Path(config.output) / "train.h5"
@@ -214,9 +238,10 @@ def _assign_garment_frames(jobs: list[_Job], settings: SDFSampleSettings,
         with h5py.File(path, "r") as file:
             for sequence_id, group in sorted(file.get("sequences", {}).items()):
                 shape = tuple(float(v) for v in group["body_shape"][:])
-                job = by_shape.get(shape)
+                job = by_shape.get(_shape_key(shape))
                 if job is None:
-                    job = by_shape[shape] = _Job(shape, (), int(rng.integers(2**31)))
+                    job = _Job(shape, (), int(rng.integers(2**31)))
+                    by_shape[_shape_key(shape)] = job
                     jobs.append(job)
                 frames = group["garment_vertices"].shape[0]
                 chosen = sorted(rng.choice(frames, min(settings.garment_frames, frames),

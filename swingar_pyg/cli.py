@@ -196,6 +196,10 @@ def build_parser() -> argparse.ArgumentParser:
     predict.add_argument("--no-preview", dest="preview", action="store_false")
     predict.add_argument("--no-collisions", dest="collisions", action="store_false",
                          help="keep vertices the estimator put inside the body")
+    predict.add_argument("--body-sdf", default=None, metavar="CKPT",
+                         help="find collisions with this neural body SDF (a checkpoint of "
+                              "`swingar fit -c configs/body_sdf.yaml`) instead of the exact, "
+                              "slower mesh SDF")
     predict.set_defaults(run=_predict)
 
     quickstart = commands.add_parser(
@@ -211,15 +215,16 @@ def _predict(args: argparse.Namespace) -> int:
 
     summary = predict_to_folder(args.ckpt, args.garment, args.motion, args.out,
                                 args.body_shape, args.seconds, args.preview,
-                                collisions=args.collisions)
+                                collisions=args.collisions, body_sdf=args.body_sdf)
     print(f"{summary['garment']} ({summary['vertices']} vertices) on {summary['motion']}: "
           f"{summary['frames']} frames at {summary['ms_per_frame_median']:.1f} ms/frame "
           f"-> {args.out}")
     if summary["collisions"]:
         counts = summary["collisions"]
-        print(f"collisions: moved {counts['moved']} vertex-frames out of the body; inside "
-              f"before {counts['inside_before']}, after {counts['inside_after']} (of "
-              f"{counts['vertex_frames']})")
+        print(f"collisions ({counts['sdf']} SDF, {counts['ms_per_frame_median']:.1f} ms/frame): "
+              f"moved {counts['moved']} vertex-frames out of the body; inside before "
+              f"{counts['inside_before']}, after {counts['inside_after']} (of "
+              f"{counts['vertex_frames']}, by the exact SDF)")
     return 0
 
 

@@ -61,7 +61,9 @@ def animate(estimator: SwinGarEstimator, graph: GarmentWindow, body_shape: torch
     return torch.stack(out), np.asarray(seconds)
 
 
-def _load_estimator(checkpoint: str | Path) -> tuple[SwinGarEstimator, dict]:
+def load_estimator(checkpoint: str | Path) -> tuple[SwinGarEstimator, dict]:
+    """The estimator of a ``swingar fit`` checkpoint (in eval mode), and the
+    hyperparameters of the datamodule it was trained with (descriptor settings)."""
     from swingar_pyg.training import SwinGarModule
 
     if not Path(checkpoint).is_file():
@@ -92,12 +94,15 @@ def write_obj(path: Path, vertices: np.ndarray, faces: np.ndarray) -> None:
         tmp.write_text("\n".join(lines) + "\n")
 
 
-def correct_collisions(vertices: np.ndarray, edge_index: torch.Tensor,
-                       body_vertices: torch.Tensor, body_faces: torch.Tensor,
+def correct_collisions(vertices: np.ndarray, edge_index: torch.Tensor, posed,
+                       body_faces: torch.Tensor, neural=None,
                        progress: bool = True) -> tuple[np.ndarray, dict]:
-    """Moves garment vertices out of the posed body, frame by frame, with the
-    exact body SDF (:func:`~swingar_pyg.collision.resolve_collisions`); returns
-    the corrected frames and counts of vertices inside before and after."""
+    """Moves garment vertices out of the posed body (a
+    :class:`~swingar_pyg.world.body.PosedBody`), frame by frame, with
+    :func:`~swingar_pyg.collision.resolve_collisions`: through the neural body
+    SDF if ``neural`` (:class:`~swingar_pyg.collision.NeuralCollisions`) is
+    given, else the exact one. Returns the corrected frames and counts of
+    vertices inside before and after (by the exact SDF) and of those moved."""
     from swingar_pyg.collision import exact_signed_distance, resolve_collisions
 
     frames = range(len(vertices))
@@ -105,32 +110,42 @@ def correct_collisions(vertices: np.ndarray, edge_index: torch.Tensor,
         from tqdm import tqdm
 
         frames = tqdm(frames, desc="collisions", unit="frame")
-    out, moved, before, after = vertices.copy(), 0, 0, 0
+    out, moved, before, after, seconds = vertices.copy(), 0, 0, 0, []
     for t in frames:
-        signed_distance = exact_signed_distance(body_vertices[t], body_faces)
+        exact = exact_signed_distance(posed.vertices[t], body_faces)
         x = torch.as_tensor(vertices[t], dtype=torch.float64)
-        before += int((signed_distance(x)[0] > 0).sum())
-        result = resolve_collisions(x, edge_index, signed_distance)
-        after += int((signed_distance(result.vertices)[0] > 0).sum())
+        before += int((exact(x)[0] > 0).sum())
+        start = time.perf_counter()
+        if neural is None:
+            result = resolve_collisions(x, edge_index, exact)
+        else:
+            result = neural.correct(x.float(), edge_index, posed.joint_transforms[t],
+                                    posed.joint_positions[t])
+        seconds.append(time.perf_counter() - start)
+        corrected = result.vertices.double()
+        after += int((exact(corrected)[0] > 0).sum())
         moved += int(result.moved.sum())
-        out[t] = result.vertices.numpy()
-    return out, {"inside_before": before, "inside_after": after, "moved": moved,
-                 "vertex_frames": int(vertices.shape[0] * vertices.shape[1])}
+        out[t] = corrected.numpy()
+    return out, {"sdf": "exact" if neural is None else "neural", "inside_before": before,
+                 "inside_after": after, "moved": moved,
+                 "vertex_frames": int(vertices.shape[0] * vertices.shape[1]),
+                 "ms_per_frame_median": 1e3 * float(np.median(seconds))}
 
 
 def predict_to_folder(checkpoint: str, garment: str, motion: str, out: str | Path,
                       body_shape: list[float] | None = None, seconds: float | None = None,
                       preview: bool = True, progress: bool = True,
-                      collisions: bool = True) -> dict:
+                      collisions: bool = True, body_sdf: str | None = None) -> dict:
     """Animates ``garment`` (a mesh file or a shipped garment name) on ``motion``
     (a procedural family, a shipped clip or a ``.bvh`` path) and writes to
     ``out``: ``frames/frame_0000.obj`` …, ``garment.npz`` (all frames, faces,
     body shape, per-frame seconds), ``preview.gif`` and ``summary.json``. With
-    ``collisions``, vertices inside the body are moved out (exact body SDF)."""
+    ``collisions``, vertices inside the body are moved out: by the neural body
+    SDF of the checkpoint ``body_sdf`` if given, else by the exact one."""
     from swingar_pyg.world.body import AnnyBody
     from swingar_pyg.world.motion_library import make_motion
 
-    estimator, data_settings = _load_estimator(checkpoint)
+    estimator, data_settings = load_estimator(checkpoint)
     body = AnnyBody()
     shape = body.default_shape() if body_shape is None else torch.tensor(body_shape)
     fitted = _load_garment(garment, body, shape)
@@ -147,8 +162,13 @@ def predict_to_folder(checkpoint: str, garment: str, motion: str, out: str | Pat
                          "inputs are broken")
     collision_counts = None
     if collisions:
-        vertices, collision_counts = correct_collisions(vertices, graph.edge_index,
-                                                        posed.vertices, body.faces, progress)
+        neural = None
+        if body_sdf is not None:
+            from swingar_pyg.collision import NeuralCollisions
+
+            neural = NeuralCollisions.from_checkpoint(body_sdf, body, shape)
+        vertices, collision_counts = correct_collisions(vertices, graph.edge_index, posed,
+                                                        body.faces, neural, progress)
     out = Path(out)
     faces = fitted.mesh.faces
     for t, frame in enumerate(vertices):

@@ -24,3 +24,16 @@ def tiny_windows(tmp_path_factory):
     module.prepare_data()
     module.setup()
     return module
+
+
+@pytest.fixture(scope='session')
+def tiny_body_sdf(tiny_windows, tmp_path_factory):
+    """A checkpoint of `swingar fit -c configs/body_sdf.yaml` on tiny samples (4 steps)."""
+    from swingar_pyg.cli import main
+    from tests.windows import TINY_BODY_SDF
+
+    root = tmp_path_factory.mktemp('body_sdf')
+    config = root / 'tiny_sdf.yaml'
+    config.write_text(TINY_BODY_SDF.format(root=root, dataset=tiny_windows.hparams.config))
+    assert main(['fit', '-c', 'configs/body_sdf.yaml', '-c', str(config)]) == 0
+    return root / 'checkpoints' / 'last.ckpt'

@@ -264,39 +264,8 @@ def test_broad_phase_skips_the_network_for_a_garment_far_from_the_body(trained_c
     assert math.isclose(float(capsules.radius[0]), R, rel_tol=1e-5)
 
 
-TINY_SDF = """
-trainer:
-  max_steps: 4
-  val_check_interval: 2
-  log_every_n_steps: 1
-  enable_progress_bar: false
-  enable_model_summary: false
-  default_root_dir: {root}
-model:
-  init_args:
-    body_sdf: {{init_args: {{channels: 16, layers: 2, frequencies: 1}}}}
-data:
-  init_args:
-    root: {root}/data
-    workers: 1
-    frames_per_batch: 2
-    points_per_frame: 64
-    samples:
-      shapes: [[0.5, 0.5, 0.5, 0.5, 0.5, 0.5]]
-      random_shapes: 1
-      val_shapes: 1
-      motions: [sway]
-      val_motions: [leg_split]
-      frames_per_motion: 1
-      seconds: 1.0
-      points_per_frame: 128
-      garment_datasets: [{dataset}]
-      garment_frames: 2
-"""
-
-
 @pytest.mark.filterwarnings('ignore:The .*dataloader.* does not have many workers')
-def test_cli_trains_the_body_sdf_from_its_config(tiny_windows, tmp_path):
+def test_cli_trains_the_body_sdf_from_its_config(tiny_windows, tiny_body_sdf, tmp_path):
     import csv
     import os
 
@@ -305,23 +274,23 @@ def test_cli_trains_the_body_sdf_from_its_config(tiny_windows, tmp_path):
 
     from datamodules import BodySDFDataModule
     from datamodules.body_sdf_data import read_split
-    from swingar_pyg.cli import main
     from swingar_pyg.collision import body_signed_distance
     from swingar_pyg.training import BodySDFModule
     from swingar_pyg.world.body import AnnyBody
 
-    config = tmp_path / 'tiny_sdf.yaml'
-    config.write_text(TINY_SDF.format(root=tmp_path, dataset=tiny_windows.hparams.config))
-    assert main(['fit', '-c', 'configs/body_sdf.yaml', '-c', str(config)]) == 0
-    metrics = (tmp_path / 'logs' / 'version_0' / 'metrics.csv').read_text().splitlines()
+    import shutil
+
+    root = tiny_body_sdf.parents[1]
+    config = root / 'tiny_sdf.yaml'
+    metrics = (root / 'logs' / 'version_0' / 'metrics.csv').read_text().splitlines()
     rows = list(csv.DictReader(metrics))
     errors = [float(r['val/near_mean_mm']) for r in rows if r.get('val/near_mean_mm')]
     assert len(errors) == 2 and all(np.isfinite(errors))
-    module = BodySDFModule.load_from_checkpoint(tmp_path / 'checkpoints' / 'last.ckpt')
+    module = BodySDFModule.load_from_checkpoint(tiny_body_sdf)
     assert module.body_sdf.frequencies == 1
 
     # 2 shapes x 1 motion x 1 frame, and 2 garment frames of each training sequence
-    train = read_split(tmp_path / 'data' / 'train.h5')
+    train = read_split(root / 'data' / 'train.h5')
     sequences = len(tiny_windows.datasets['train'].sequences)
     assert train['points'].shape == (2 + 2 * sequences, 128, 3)
     assert sum('@train' in m for m in train['motion']) == 2 * sequences
@@ -337,10 +306,11 @@ def test_cli_trains_the_body_sdf_from_its_config(tiny_windows, tmp_path):
         sdf, _ = body_signed_distance(train['points'][frame], posed.double().numpy(),
                                       body.faces.numpy())
         assert np.allclose(sdf, train['sdf'][frame], atol=1e-4)
-    with h5py.File(tmp_path / 'data' / 'val.h5', 'r') as file:
+    with h5py.File(root / 'data' / 'val.h5', 'r') as file:
         assert file.attrs['split'] == 'val' and file['points'].shape[0] == 1
     # a split made with the same settings is reused, another setting remakes it
     samples = yaml.safe_load(config.read_text())['data']['init_args']['samples']
+    shutil.copytree(root / 'data', tmp_path / 'data')
     train_file = tmp_path / 'data' / 'train.h5'
     stamp = os.stat(train_file).st_mtime_ns
     BodySDFDataModule(root=str(tmp_path / 'data'), samples=samples, workers=1).prepare_data()

@@ -179,3 +179,15 @@ def test_bad_windows_are_refused_by_name(tiny_windows):
     with pytest.raises(ValueError, match='not finite'):
         model(Batch.from_data_list([infinite]))
 
+
+
+def test_bfloat16_autocast_runs_and_stays_close_to_float32(tiny_windows):
+    # oneDNN has no bfloat16 LSTM on the CPU: the motion encoder must leave autocast
+    model = trained_like()
+    batch = next(iter(tiny_windows.test_dataloader()))
+    with torch.no_grad():
+        full = model(batch).vertices
+        with torch.autocast('cpu', dtype=torch.bfloat16):
+            half = model(batch).vertices
+    assert torch.isfinite(half).all()
+    assert (half.float() - full).norm(dim=-1).max() < 0.02

@@ -59,6 +59,24 @@ def test_predict_animates_a_garment_of_unseen_topology_from_an_obj(checkpoint, t
     assert float(nearest.max()) < float(skirt.fit.max()) + 0.10
 
 
+def test_predict_finds_collisions_with_the_neural_body_sdf(checkpoint, tiny_body_sdf, tmp_path,
+                                                           capsys):
+    from swingar_pyg.cli import main
+
+    out = tmp_path / 'out'
+    assert main(['predict', '--ckpt', str(checkpoint), '--garment', 'dress_skirt_knee',
+                 '--motion', 'kick', '--seconds', '0.3', '--body-sdf', str(tiny_body_sdf),
+                 '--no-preview', '--out', str(out)]) == 0
+    assert 'collisions (neural SDF' in capsys.readouterr().out
+    summary = json.loads((out / 'summary.json').read_text())
+    assert summary['collisions']['sdf'] == 'neural'
+    assert np.isfinite(np.load(out / 'garment.npz')['vertices']).all()
+    with pytest.raises(SystemExit):
+        main(['predict', '--ckpt', str(checkpoint), '--garment', 'dress_skirt_knee',
+              '--body-sdf', str(tmp_path / 'none.ckpt'), '--out', str(out)])
+    assert 'no body SDF checkpoint at' in capsys.readouterr().err
+
+
 def test_predict_names_a_missing_garment_or_checkpoint(checkpoint, tmp_path, capsys):
     from swingar_pyg.cli import main
 

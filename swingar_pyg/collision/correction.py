@@ -134,3 +134,25 @@ def exact_signed_distance(body_vertices: Tensor, body_faces: Tensor) -> SignedDi
                 -torch.as_tensor(n, dtype=points.dtype, device=points.device))
 
     return evaluate
+
+
+def nearest_vertex_signed_distance(body_vertices: Tensor, body_faces: Tensor) -> SignedDistance:
+    r"""TailorNet's test: :math:`S = (\mathbf{b} - \mathbf{x}) \cdot \mathbf{n}_b` with
+    :math:`\mathbf{b}` the body vertex nearest to :math:`\mathbf{x}` and
+    :math:`\mathbf{n}_b` its normal, :math:`\nabla S = -\mathbf{n}_b`. Fast (a
+    KD-tree), but the nearest vertex's tangent plane is not the surface where
+    the surface curves within a vertex spacing (armpits, crotch, fingers)."""
+    from scipy.spatial import cKDTree
+
+    from swingar_pyg.geometry.normals import vertex_normals
+
+    normals = vertex_normals(body_vertices, body_faces)
+    tree = cKDTree(body_vertices.detach().cpu().numpy())
+
+    def evaluate(points: Tensor) -> tuple[Tensor, Tensor]:
+        _, index = tree.query(points.detach().cpu().numpy())
+        index = torch.as_tensor(index, device=points.device)
+        normal = normals[index].to(points)
+        return ((body_vertices[index].to(points) - points) * normal).sum(-1), -normal
+
+    return evaluate

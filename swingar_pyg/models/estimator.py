@@ -181,7 +181,11 @@ class SwinGarEstimator(nn.Module):
         """:math:`M_m`: ``(G, F, m, P)`` windows and masks ``(G, F, m)`` → ``(G, F, C)``."""
         graphs, frames, length, size = pose_history.shape
         inputs = torch.cat([pose_history, history_mask.unsqueeze(-1)], dim=-1)
-        _, (h, _) = self.motion_encoder(inputs.reshape(graphs * frames, length, size + 1))
+        # The LSTM runs in the weights' precision: under CPU autocast oneDNN has no
+        # bfloat16 LSTM and fails, and a 64-step recurrence loses most in half precision.
+        with torch.autocast(inputs.device.type, enabled=False):
+            _, (h, _) = self.motion_encoder(inputs.reshape(graphs * frames, length, size + 1).to(
+                self.motion_encoder.weight_ih_l0.dtype))
         return h[-1].reshape(graphs, frames, -1)
 
     def body_codes(self, body_shape: Tensor, pose_history: Tensor) -> Tensor:

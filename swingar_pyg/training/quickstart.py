@@ -45,12 +45,11 @@ def _time_simulator(path: Path, sequence_ids: list[str], progress: bool) -> dict
     median ms per frame per garment."""
     import h5py
 
-    from swingar_pyg.geometry import as_mesh
     from swingar_pyg.sim import XPBDSettings
     from swingar_pyg.world.body import AnnyBody
-    from swingar_pyg.world.garment import Garment
     from swingar_pyg.world.motion import Motion
     from swingar_pyg.world.sequence import simulate_sequence
+    from swingar_pyg.world.sequence_file import read_garment
 
     body = AnnyBody()
     out = {}
@@ -58,12 +57,6 @@ def _time_simulator(path: Path, sequence_ids: list[str], progress: bool) -> dict
         with h5py.File(path, "r") as file:
             group = file[f"sequences/{sequence_id}"]
             name = str(group.attrs["garment"])
-            stored = file[f"garments/{name}"]
-            garment = Garment(name, as_mesh(stored["rest_vertices"][:].astype(np.float64),
-                                            stored["faces"][:]),
-                              stored["pinned"][:].astype(np.int64),
-                              stored["skin_indices"][:].astype(np.int64),
-                              stored["skin_weights"][:], stored["fit"][:])
             fps = float(group.attrs["fps"])
             motion = Motion(str(group.attrs["motion"]), torch.as_tensor(group["rotations"][:]),
                             torch.as_tensor(group["translation"][:]), fps,
@@ -71,7 +64,7 @@ def _time_simulator(path: Path, sequence_ids: list[str], progress: bool) -> dict
             settings = json.loads(group.attrs["settings"])
             shape = torch.as_tensor(group["body_shape"][:])
         settings = XPBDSettings(**{**settings, "gravity": tuple(settings["gravity"])})
-        result = simulate_sequence(body, shape, garment, motion, settings,
+        result = simulate_sequence(body, shape, read_garment(path, name), motion, settings,
                                    progress=progress).result
         out[name] = 1e3 * float(np.median(result.seconds_per_frame))
     return out

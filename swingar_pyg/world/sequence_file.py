@@ -23,6 +23,7 @@ import numpy as np
 
 from swingar_pyg.atomic import atomic_path
 from swingar_pyg.sim import SIMULATOR_REVISION
+from swingar_pyg.world.garment import Garment
 from swingar_pyg.world.sequence import SimulatedSequence
 
 _COMPRESSION = {"compression": "gzip", "compression_opts": 4}
@@ -109,6 +110,23 @@ def read_sequence(path: str | Path, sequence_id: str) -> dict:
                    joint_names=tuple(json.loads(group.attrs["joint_names"])),
                    faces=file[f"garments/{group.attrs['garment']}/faces"][:])
     return out
+
+
+def read_garment(path: str | Path, name: str) -> Garment:
+    """A garment stored in a sequence file, as the simulator was given it."""
+    import h5py
+
+    from swingar_pyg.geometry import as_mesh
+
+    with h5py.File(path, "r") as file:
+        if name not in file.get("garments", {}):
+            raise ValueError(f"{path} has no garment {name!r}")
+        stored = file[f"garments/{name}"]
+        return Garment(name, as_mesh(stored["rest_vertices"][:].astype(np.float64),
+                                     stored["faces"][:]),
+                       stored["pinned"][:].astype(np.int64),
+                       stored["skin_indices"][:].astype(np.int64),
+                       stored["skin_weights"][:], stored["fit"][:])
 
 
 def simulator_revisions(path: str | Path) -> set[int]:
