@@ -216,13 +216,16 @@ def _predict(args: argparse.Namespace) -> int:
     summary = predict_to_folder(args.ckpt, args.garment, args.motion, args.out,
                                 args.body_shape, args.seconds, args.preview,
                                 collisions=args.collisions, body_sdf=args.body_sdf)
+    from swingar_pyg.scene import StageCost, stage_table
+
+    print(stage_table([StageCost(**stage) for stage in summary["stages"]]))
     print(f"{summary['garment']} ({summary['vertices']} vertices) on {summary['motion']}: "
-          f"{summary['frames']} frames at {summary['ms_per_frame_median']:.1f} ms/frame "
-          f"-> {args.out}")
+          f"{summary['frames']} frames, estimator {summary['estimator_ms_per_frame']:.1f} "
+          f"ms/frame -> {args.out}")
     if summary["collisions"]:
         counts = summary["collisions"]
-        print(f"collisions ({counts['sdf']} SDF, {counts['ms_per_frame_median']:.1f} ms/frame): "
-              f"moved {counts['moved']} vertex-frames out of the body; inside before "
+        print(f"collisions ({counts['sdf']} SDF, on {counts['ran_on_frames']} frames): moved "
+              f"{counts['moved']} vertex-frames out of the body; inside before "
               f"{counts['inside_before']}, after {counts['inside_after']} (of "
               f"{counts['vertex_frames']}, by the exact SDF)")
     return 0

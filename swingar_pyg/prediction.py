@@ -9,6 +9,7 @@ transferred skinning and descriptor here, then the motion is streamed through
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import time
 from pathlib import Path
@@ -94,42 +95,23 @@ def write_obj(path: Path, vertices: np.ndarray, faces: np.ndarray) -> None:
         tmp.write_text("\n".join(lines) + "\n")
 
 
-def correct_collisions(vertices: np.ndarray, edge_index: torch.Tensor, posed,
-                       body_faces: torch.Tensor, neural=None,
-                       progress: bool = True) -> tuple[np.ndarray, dict]:
-    """Moves garment vertices out of the posed body (a
-    :class:`~swingar_pyg.world.body.PosedBody`), frame by frame, with
-    :func:`~swingar_pyg.collision.resolve_collisions`: through the neural body
-    SDF if ``neural`` (:class:`~swingar_pyg.collision.NeuralCollisions`) is
-    given, else the exact one. Returns the corrected frames and counts of
-    vertices inside before and after (by the exact SDF) and of those moved."""
-    from swingar_pyg.collision import exact_signed_distance, resolve_collisions
+def inside_counts(before: torch.Tensor, after: torch.Tensor, posed, body_faces: torch.Tensor,
+                  progress: bool = True) -> dict:
+    """Garment vertices inside the posed body (exact SDF) before and after the
+    collision pass, over all frames ``(T, N, 3)``."""
+    from swingar_pyg.collision.reference import BodySurface
 
-    frames = range(len(vertices))
+    frames = range(len(before))
     if progress:
         from tqdm import tqdm
 
-        frames = tqdm(frames, desc="collisions", unit="frame")
-    out, moved, before, after, seconds = vertices.copy(), 0, 0, 0, []
+        frames = tqdm(frames, desc="inside counts (exact SDF)", unit="frame")
+    counts = {"inside_before": 0, "inside_after": 0}
     for t in frames:
-        exact = exact_signed_distance(posed.vertices[t], body_faces)
-        x = torch.as_tensor(vertices[t], dtype=torch.float64)
-        before += int((exact(x)[0] > 0).sum())
-        start = time.perf_counter()
-        if neural is None:
-            result = resolve_collisions(x, edge_index, exact)
-        else:
-            result = neural.correct(x.float(), edge_index, posed.joint_transforms[t],
-                                    posed.joint_positions[t])
-        seconds.append(time.perf_counter() - start)
-        corrected = result.vertices.double()
-        after += int((exact(corrected)[0] > 0).sum())
-        moved += int(result.moved.sum())
-        out[t] = corrected.numpy()
-    return out, {"sdf": "exact" if neural is None else "neural", "inside_before": before,
-                 "inside_after": after, "moved": moved,
-                 "vertex_frames": int(vertices.shape[0] * vertices.shape[1]),
-                 "ms_per_frame_median": 1e3 * float(np.median(seconds))}
+        surface = BodySurface(posed.vertices[t].double().numpy(), body_faces.numpy())
+        for key, vertices in (("inside_before", before), ("inside_after", after)):
+            counts[key] += int((surface.signed_distance(vertices[t].double().numpy())[0] > 0).sum())
+    return counts
 
 
 def predict_to_folder(checkpoint: str, garment: str, motion: str, out: str | Path,
@@ -139,36 +121,36 @@ def predict_to_folder(checkpoint: str, garment: str, motion: str, out: str | Pat
     """Animates ``garment`` (a mesh file or a shipped garment name) on ``motion``
     (a procedural family, a shipped clip or a ``.bvh`` path) and writes to
     ``out``: ``frames/frame_0000.obj`` …, ``garment.npz`` (all frames, faces,
-    body shape, per-frame seconds), ``preview.gif`` and ``summary.json``. With
-    ``collisions``, vertices inside the body are moved out: by the neural body
-    SDF of the checkpoint ``body_sdf`` if given, else by the exact one."""
+    body shape), ``preview.gif`` and ``summary.json`` (with what each stage of
+    the :class:`~swingar_pyg.scene.Scene` pipeline cost). With ``collisions``,
+    vertices inside the body are moved out: by the neural body SDF of the
+    checkpoint ``body_sdf`` if given, else by the exact one."""
     from swingar_pyg.world.body import AnnyBody
     from swingar_pyg.world.motion_library import make_motion
+
+    from swingar_pyg.scene import Scene, compile_scene
 
     estimator, data_settings = load_estimator(checkpoint)
     body = AnnyBody()
     shape = body.default_shape() if body_shape is None else torch.tensor(body_shape)
     fitted = _load_garment(garment, body, shape)
     clip = make_motion(motion, body, shape, seconds=seconds)
-    posed = body.pose(shape, clip.rotations, clip.translation)
-    graph = garment_graph(fitted, len(body.joint_names), estimator.descriptor_size,
-                          sigma=data_settings.get("sigma", 0.1), seed=data_settings.get("seed", 0))
-    vertices, frame_seconds = animate(estimator, graph, shape, clip.rotations, clip.translation,
-                                      posed.joint_transforms, posed.joint_positions, clip.fps,
-                                      progress)
-    vertices = vertices.numpy()
-    if not np.isfinite(vertices).all():
+    scene = Scene([fitted], body, shape, clip, collisions=collisions, body_sdf=body_sdf)
+    result = compile_scene(scene, estimator, sigma=data_settings.get("sigma", 0.1),
+                           seed=data_settings.get("seed", 0)).run(progress)
+    if not torch.isfinite(result.vertices[0]).all():
         raise ValueError("the estimator produced non-finite vertices; the checkpoint or the "
                          "inputs are broken")
+    vertices = result.vertices[0].numpy()
+    posed = body.pose(shape, clip.rotations, clip.translation)
     collision_counts = None
     if collisions:
-        neural = None
-        if body_sdf is not None:
-            from swingar_pyg.collision import NeuralCollisions
-
-            neural = NeuralCollisions.from_checkpoint(body_sdf, body, shape)
-        vertices, collision_counts = correct_collisions(vertices, graph.edge_index, posed,
-                                                        body.faces, neural, progress)
+        stage = result.stage("collisions: SDF + correction")
+        collision_counts = {"sdf": "exact" if body_sdf is None else "neural",
+                            "moved": stage.moved, "ran_on_frames": stage.calls,
+                            "vertex_frames": int(vertices.shape[0] * vertices.shape[1]),
+                            **inside_counts(result.before_collisions[0], result.vertices[0],
+                                            posed, body.faces, progress)}
     out = Path(out)
     faces = fitted.mesh.faces
     for t, frame in enumerate(vertices):
@@ -176,18 +158,18 @@ def predict_to_folder(checkpoint: str, garment: str, motion: str, out: str | Pat
     with atomic_path(out / "garment.npz") as tmp:
         with open(tmp, "wb") as handle:
             np.savez_compressed(handle, vertices=vertices, faces=faces,
-                                body_shape=shape.numpy(), seconds_per_frame=frame_seconds,
-                                fps=clip.fps)
+                                body_shape=shape.numpy(), fps=clip.fps)
     if preview:
         from swingar_pyg.viz.preview import render_sequence
 
         render_sequence(out / "preview.gif", posed.vertices.numpy(), body.faces.numpy(),
                         vertices, faces, fps=clip.fps, title=f"{fitted.name} / {clip.name}")
+    network = ("motion code", "skinning (E, P, LBS)", "detail (M_d)")
     summary = {"garment": fitted.name, "vertices": int(fitted.mesh.num_vertices),
                "motion": clip.name, "frames": int(len(vertices)),
-               "ms_per_frame_median": 1e3 * float(np.median(frame_seconds[1:]))
-               if len(frame_seconds) > 1 else 1e3 * float(frame_seconds[0]),
-               "checkpoint": str(checkpoint), "collisions": collision_counts}
+               "estimator_ms_per_frame": 1e3 * sum(result.stage(n).seconds for n in network) /
+               len(vertices), "checkpoint": str(checkpoint), "collisions": collision_counts,
+               "stages": [dataclasses.asdict(stage) for stage in result.stages]}
     with atomic_path(out / "summary.json") as tmp:
         tmp.write_text(json.dumps(summary, indent=2))
     return summary

@@ -124,12 +124,12 @@ def fixed_offset_push(vertices: Tensor, signed_distance: SignedDistance,
 def exact_signed_distance(body_vertices: Tensor, body_faces: Tensor) -> SignedDistance:
     """:math:`S` and :math:`\\nabla S` of a posed body mesh, exactly (slow: the
     reference for metrics and for checking the network)."""
-    from swingar_pyg.collision.reference import body_signed_distance
+    from swingar_pyg.collision.reference import BodySurface
 
-    vertices, faces = body_vertices.detach().cpu().numpy(), body_faces.cpu().numpy()
+    surface = BodySurface(body_vertices.detach().cpu().numpy(), body_faces.cpu().numpy())
 
     def evaluate(points: Tensor) -> tuple[Tensor, Tensor]:
-        s, n = body_signed_distance(points.detach().cpu().numpy(), vertices, faces)
+        s, n = surface.signed_distance(points.detach().cpu().numpy())
         return (torch.as_tensor(s, dtype=points.dtype, device=points.device),
                 -torch.as_tensor(n, dtype=points.dtype, device=points.device))
 

@@ -51,10 +51,12 @@ class NeuralCollisions:
                    **options)
 
     def correct(self, vertices: Tensor, edge_index: Tensor, joint_transforms: Tensor,
-                joint_positions: Tensor) -> Correction:
+                joint_positions: Tensor, near: Tensor | None = None) -> Correction:
         """One frame: garment ``(N, 3)`` (a Batch of garments is fine), mesh
-        edges, and the body's ``(J, 4, 4)`` transforms and ``(J, 3)`` joints."""
-        near = self.capsules.near(vertices, joint_positions, self.margin)
+        edges, and the body's ``(J, 4, 4)`` transforms and ``(J, 3)`` joints;
+        ``near``: the broad phase's result, if already known."""
+        if near is None:
+            near = self.capsules.near(vertices, joint_positions, self.margin)
         field = self.body_sdf.bind(joint_transforms.to(vertices), joint_positions.to(vertices),
                                    self.body_shape.to(vertices))
         return resolve_collisions(vertices, edge_index, field, iterations=self.iterations,

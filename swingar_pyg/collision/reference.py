@@ -10,41 +10,60 @@ from __future__ import annotations
 import numpy as np
 
 
+class BodySurface:
+    """A closed, outward-facing triangle mesh prepared once for exact signed
+    distance queries (its ray-intersection structure is built on first use and
+    kept).
+
+    Raises:
+        ValueError: if the mesh is not closed (inside would be undefined).
+    """
+
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray):
+        import trimesh
+
+        self.surface = trimesh.Trimesh(np.asarray(vertices, dtype=np.float64), faces,
+                                       process=False)
+        if not self.surface.is_watertight:
+            raise ValueError("the body mesh is not closed (watertight): inside is undefined")
+
+    def signed_distance(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Exact signed distance (positive inside) and outward normal of points.
+
+        The distance is to the closest point on the triangles; inside/outside
+        comes from ray parity over the whole mesh (trimesh's ``contains``), not
+        from the closest face, whose normal can point the wrong way in armpits
+        and the crotch where the closest point lies on an edge. The normal is
+        the direction from the closest point to the point (turned outward), or
+        the closest face's normal for points on the surface.
+
+        Args:
+            points: ``(M, 3)``.
+
+        Returns:
+            ``s`` ``(M,)`` and ``n`` ``(M, 3)``.
+        """
+        import trimesh
+
+        points = np.asarray(points, dtype=np.float64)
+        if points.ndim != 2 or points.shape[1] != 3:
+            raise ValueError(f"points must have shape (M, 3), got {points.shape}")
+        if not np.isfinite(points).all():
+            raise ValueError("points must be finite")
+        closest, distance, face = trimesh.proximity.closest_point(self.surface, points)
+        inside = self.surface.contains(points)
+        offset = points - closest
+        scale = np.maximum(np.abs(points).max(initial=0.0), 1.0)
+        on_surface = distance <= 1e-9 * scale
+        direction = offset / np.where(on_surface, 1.0, distance)[:, None]
+        direction = np.where(inside[:, None], -direction, direction)
+        normal = np.where(on_surface[:, None], self.surface.face_normals[face], direction)
+        return np.where(inside, distance, -distance), normal
+
+
 def body_signed_distance(points: np.ndarray, vertices: np.ndarray,
                          faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Exact signed distance (positive inside) and outward normal of points
-    to a closed triangle mesh.
-
-    The distance is to the closest point on the triangles; inside/outside comes
-    from ray parity over the whole mesh (trimesh's ``contains``), not from the
-    closest face, whose normal can point the wrong way in armpits and the crotch
-    where the closest point lies on an edge. The normal is the direction from
-    the closest point to the point (turned outward), or the closest face's
-    normal for points on the surface.
-
-    Args:
-        points: ``(M, 3)``; vertices: ``(V, 3)``; faces: ``(F, 3)`` of a closed,
-            outward-facing mesh.
-
-    Returns:
-        ``s`` ``(M,)`` and ``n`` ``(M, 3)``.
-    """
-    import trimesh
-
-    points = np.asarray(points, dtype=np.float64)
-    if points.ndim != 2 or points.shape[1] != 3:
-        raise ValueError(f"points must have shape (M, 3), got {points.shape}")
-    if not np.isfinite(points).all():
-        raise ValueError("points must be finite")
-    surface = trimesh.Trimesh(vertices, faces, process=False)
-    if not surface.is_watertight:
-        raise ValueError("the body mesh is not closed (watertight): inside is undefined")
-    closest, distance, face = trimesh.proximity.closest_point(surface, points)
-    inside = surface.contains(points)
-    offset = points - closest
-    scale = np.maximum(np.abs(points).max(initial=0.0), 1.0)
-    on_surface = distance <= 1e-9 * scale
-    direction = offset / np.where(on_surface, 1.0, distance)[:, None]
-    direction = np.where(inside[:, None], -direction, direction)
-    normal = np.where(on_surface[:, None], surface.face_normals[face], direction)
-    return np.where(inside, distance, -distance), normal
+    """:meth:`BodySurface.signed_distance` of ``points`` to the closed mesh
+    ``vertices`` ``(V, 3)``, ``faces`` ``(F, 3)``: ``s`` ``(M,)`` (positive
+    inside) and the outward normal ``(M, 3)``."""
+    return BodySurface(vertices, faces).signed_distance(points)

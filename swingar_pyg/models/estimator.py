@@ -222,12 +222,12 @@ class SwinGarEstimator(nn.Module):
         correction = self.correction(hidden * body_codes[batch].transpose(0, 1))
         return skinned + torch.einsum("nab,fnb->fna", rotation, correction)
 
-    def stream(self, garment, body_shape: Tensor, fps: float) -> "SwinGarStream":
+    def stream(self, garment, body_shape: Tensor, fps: float, timer=None) -> "SwinGarStream":
         """Frame-by-frame inference with a rolling cache
         (:class:`~swingar_pyg.models.streaming.SwinGarStream`)."""
         from swingar_pyg.models.streaming import SwinGarStream
 
-        return SwinGarStream(self, garment, body_shape, fps)
+        return SwinGarStream(self, garment, body_shape, fps, timer)
 
     def forward(self, data) -> EstimatorOutput:
         _check_window(data, self.num_joints, self.history)
