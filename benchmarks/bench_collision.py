@@ -302,7 +302,8 @@ def main() -> None:
                "sdf_accuracy": accuracy}
     name = "bench_collision_quick" if args.quick else "bench_collision"
     path = write_results(name, payload, plot(methods, accuracy))
-    print(f"{frames} frames of {len(sequences)} sequences ({'estimator' if estimator else 'perturbed ground truth'})")
+    source = "estimator" if estimator else "perturbed ground truth"
+    print(f"{frames} frames of {len(sequences)} sequences ({source})")
     print(f"{'method':<15} {'inside %':>9} {'depth mean/max mm':>18} {'rough mm':>9} "
           f"{'error mm':>9} {'ms/frame':>9}")
     for method in METHODS:

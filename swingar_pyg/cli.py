@@ -202,11 +202,17 @@ def build_parser() -> argparse.ArgumentParser:
                               "slower mesh SDF")
     predict.set_defaults(run=_predict)
 
+    report = commands.add_parser(
+        "report", help="error against run time, ablations and the stability suite, measured "
+                       "in one run: a folder of Markdown, CSV and PNG (trains missing models)")
+    report.add_argument("-c", "--config", required=True, help="configs/report/<name>.yaml")
+    report.set_defaults(run=_report)
+
     quickstart = commands.add_parser(
-        "quickstart", help="the main job: make the quickstart data, train, test, and print "
-                           "error and time per frame against rigid skinning and the simulator")
-    quickstart.add_argument("-c", "--config", default="configs/quickstart.yaml")
-    quickstart.set_defaults(run=_quickstart)
+        "quickstart", help="the main job: make the quickstart data, train the estimator, and "
+                           "report its error and time against rigid skinning and the "
+                           "simulator (swingar report -c configs/report/quickstart.yaml)")
+    quickstart.set_defaults(run=_report, config="configs/report/quickstart.yaml")
     return parser
 
 
@@ -231,10 +237,15 @@ def _predict(args: argparse.Namespace) -> int:
     return 0
 
 
-def _quickstart(args: argparse.Namespace) -> int:
-    from swingar_pyg.training.quickstart import run_quickstart
+def _report(args: argparse.Namespace) -> int:
+    from swingar_pyg.eval.report import ReportConfig, run_report
 
-    run_quickstart(args.config)
+    path = run_report(ReportConfig.from_yaml(args.config))
+    text = path.read_text()
+    section = text.split("## Error against run time", 1)[1].split("\n## ", 1)[0]
+    print("\nError against run time" + section.replace("![error against run time]"
+                                                       "(error_vs_time.png)\n", ""))
+    print(f"wrote {path} (with its CSV tables and PNG plots)")
     return 0
 
 

@@ -337,9 +337,9 @@ def _estimator_extreme(kind: str):
         clip = context.motion(kind, 2.0)
         vertices = _stream(context, clip.rotations, clip.translation)
         posed = context.body.pose(context.shape, clip.rotations, clip.translation)
-        rigid = linear_blend_skinning(context.graph.rest, torch.as_tensor(context.skirt.skin_indices),
-                                      torch.as_tensor(context.skirt.skin_weights,
-                                                      dtype=torch.float32),
+        skirt = context.skirt
+        rigid = linear_blend_skinning(context.graph.rest, torch.as_tensor(skirt.skin_indices),
+                                      torch.as_tensor(skirt.skin_weights, dtype=torch.float32),
                                       posed.joint_transforms)
         return 1e3 * float((vertices - rigid).norm(dim=-1).mean()), [vertices]
     return run

@@ -60,10 +60,10 @@ def render_sequence(path: str | Path, body_vertices: np.ndarray, body_faces: np.
         body_vertices: ``(T, V, 3)``; garment_vertices: ``(T, N, 3)``.
         every: draw every n-th frame (the GIF plays at ``fps / every``).
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    # A figure of its own on an Agg canvas: pyplot's global backend (a notebook's
+    # inline one) is left as it is.
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
     from PIL import Image
 
     body_vertices = np.asarray(body_vertices)
@@ -83,8 +83,9 @@ def render_sequence(path: str | Path, body_vertices: np.ndarray, body_faces: np.
         frames = frames[:1]
     images = []
     for t in frames:
-        figure, axes = plt.subplots(1, len(azimuths), figsize=(3.2 * len(azimuths), 4.2), dpi=80)
-        axes = np.atleast_1d(axes)
+        figure = Figure(figsize=(3.2 * len(azimuths), 4.2), dpi=80)
+        FigureCanvasAgg(figure)
+        axes = np.atleast_1d(figure.subplots(1, len(azimuths)))
         for axis, rotation, azimuth in zip(axes, rotations, azimuths):
             meshes = [(body_vertices[t] - centres[t], body_faces, _BODY_COLOUR),
                       (garment_vertices[t] - centres[t], garment_faces, _GARMENT_COLOUR)]
@@ -97,7 +98,6 @@ def render_sequence(path: str | Path, body_vertices: np.ndarray, body_faces: np.
         figure.suptitle(f"{title}  frame {t} ({t / fps:.2f} s)", fontsize=9)
         figure.canvas.draw()
         images.append(Image.fromarray(np.asarray(figure.canvas.buffer_rgba())[..., :3]))
-        plt.close(figure)
     with atomic_path(path) as tmp:
         if path.suffix.lower() == ".png":
             images[0].save(tmp, format="PNG")

@@ -95,7 +95,8 @@ def merge_sequence_files(parts: list[Path], path: str | Path) -> Path:
 def read_sequence(path: str | Path, sequence_id: str) -> dict:
     """One sequence of a file as arrays: ``garment_vertices``, ``rigid_vertices``,
     ``rotations``, ``translation``, ``body_shape``, ``faces`` (the garment's), and
-    the attributes (``garment``, ``motion``, ``fps``, ``joint_names``)."""
+    the attributes (``garment``, ``motion``, ``fps``, ``joint_names``, and the
+    simulator's ``settings`` as a dict)."""
     import h5py
 
     with h5py.File(path, "r") as file:
@@ -108,6 +109,7 @@ def read_sequence(path: str | Path, sequence_id: str) -> dict:
         out.update(garment=group.attrs["garment"], motion=group.attrs["motion"],
                    fps=float(group.attrs["fps"]),
                    joint_names=tuple(json.loads(group.attrs["joint_names"])),
+                   settings=json.loads(group.attrs["settings"]),
                    faces=file[f"garments/{group.attrs['garment']}/faces"][:])
     return out
 

@@ -1,0 +1,211 @@
+"""Error against run time on a test split: every method on the same sequences,
+timed on the same machine in the same run.
+
+A method's error is the per-vertex distance (mm) to the simulated garment at
+every frame of every test sequence; its time is the median wall time per
+frame. Methods: the estimator streamed one frame at a time (any precision,
+with or without the collision pass), rigid skinning with the transferred
+weights, and the simulator itself at other settings than the ones that made the
+data (coarser ones trade error for time; a finer one measures how far the
+ground truth itself is from convergence).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+from torch import Tensor
+
+
+@dataclass
+class TestSequence:
+    """A stored sequence with what every method needs to re-run it."""
+
+    id: str
+    garment: object
+    motion: object
+    body_shape: Tensor
+    truth: Tensor
+    rigid: Tensor
+    settings: dict
+    posed: object
+
+
+def load_test_sequences(path, body, limit: int | None = None,
+                        ids: list[str] | None = None) -> list[TestSequence]:
+    """The sequences of a split file (all, the first ``limit`` or ``ids``),
+    with the body posed for each."""
+    import h5py
+
+    from swingar_pyg.world.motion import Motion
+    from swingar_pyg.world.sequence_file import read_garment, read_sequence
+
+    if ids is None:
+        with h5py.File(path, "r") as file:
+            ids = sorted(file["sequences"])[:limit]
+    out = []
+    for sequence_id in ids:
+        stored = read_sequence(path, sequence_id)
+        if stored["joint_names"] != tuple(body.joint_names):
+            raise ValueError(f"{path}:{sequence_id} was made for another rig than this body's")
+        shape = torch.as_tensor(stored["body_shape"])
+        motion = Motion(stored["motion"], torch.as_tensor(stored["rotations"]),
+                        torch.as_tensor(stored["translation"]), stored["fps"],
+                        stored["joint_names"])
+        out.append(TestSequence(sequence_id, read_garment(path, stored["garment"]), motion, shape,
+                                torch.as_tensor(stored["garment_vertices"]),
+                                torch.as_tensor(stored["rigid_vertices"]), stored["settings"],
+                                body.pose(shape, motion.rotations, motion.translation)))
+    return out
+
+
+@dataclass
+class MethodResult:
+    """One point of the curve: errors ``(T, N)`` in mm per sequence, seconds per
+    frame, and whatever else the method measured."""
+
+    name: str
+    kind: str
+    errors: dict[str, Tensor]
+    seconds: list[float]
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def ms_per_frame(self) -> float:
+        return 1e3 * float(np.median(self.seconds))
+
+    def stats(self, sequences: list[TestSequence] | None = None) -> dict[str, float]:
+        """Mean, RMSE and p95 (mm) over all errors (of ``sequences`` if given)."""
+        from swingar_pyg.training.vertex_errors import error_stats
+
+        keep = None if sequences is None else {s.id for s in sequences}
+        chosen = [e.reshape(-1) for k, e in self.errors.items() if keep is None or k in keep]
+        return error_stats(torch.cat(chosen))
+
+    def row(self) -> dict:
+        return {"method": self.name, "kind": self.kind, "ms_per_frame": self.ms_per_frame,
+                **self.stats(), **self.extra}
+
+
+def _distance_mm(a: Tensor, b: Tensor) -> Tensor:
+    return 1e3 * (a.double() - b.double()).norm(dim=-1).float()
+
+
+def evaluate_rigid(sequences: list[TestSequence]) -> MethodResult:
+    """Rigid skinning with the weights transferred from the body (the baseline)."""
+    from swingar_pyg.geometry.skinning import linear_blend_skinning
+
+    errors, seconds = {}, []
+    for s in sequences:
+        rest = torch.as_tensor(s.garment.mesh.vertices, dtype=torch.float32)
+        indices = torch.as_tensor(s.garment.skin_indices).long()
+        weights = torch.as_tensor(s.garment.skin_weights, dtype=torch.float32)
+        frames = []
+        for t in range(len(s.truth)):
+            start = time.perf_counter()
+            frames.append(linear_blend_skinning(rest, indices, weights,
+                                                s.posed.joint_transforms[t:t + 1])[0])
+            seconds.append(time.perf_counter() - start)
+        errors[s.id] = _distance_mm(torch.stack(frames), s.truth)
+    return MethodResult("rigid skinning", "rigid", errors, seconds)
+
+
+def evaluate_estimator(name: str, estimator, sequences: list[TestSequence],
+                       sigma: float = 0.1, seed: int = 0, precision: str = "fp32",
+                       collisions=None, body=None) -> MethodResult:
+    """The estimator streamed over each sequence, one frame at a time.
+
+    Args:
+        precision: ``"fp32"`` or ``"bf16"`` (CPU/GPU autocast).
+        collisions: ``None``, ``"exact"`` (exact SDF) or a
+            :class:`~swingar_pyg.collision.NeuralCollisions` factory
+            ``shape -> handler``; its time is included, and the share of
+            vertices inside the body after it (exact SDF) is recorded.
+    """
+    from swingar_pyg.collision import exact_signed_distance, resolve_collisions
+    from swingar_pyg.collision.reference import BodySurface
+    from swingar_pyg.geometry import mesh_edge_index
+    from swingar_pyg.prediction import garment_graph
+
+    if precision not in ("fp32", "bf16"):
+        raise ValueError(f"precision must be fp32 or bf16, got {precision!r}")
+    estimator = estimator.eval()
+    errors, seconds, inside, total = {}, [], 0, 0
+    device = next(estimator.parameters()).device
+    for s in sequences:
+        graph = garment_graph(s.garment, len(s.motion.joint_names), estimator.descriptor_size,
+                              sigma=sigma, seed=seed).to(device)
+        edges = mesh_edge_index(s.garment.mesh)
+        handler = collisions(s.body_shape) if callable(collisions) else None
+        stream = estimator.stream(graph, s.body_shape.to(device), s.motion.fps)
+        frames = []
+        for t in range(len(s.truth)):
+            start = time.perf_counter()
+            with torch.autocast(device.type, dtype=torch.bfloat16, enabled=precision == "bf16"):
+                vertices = stream.step(s.motion.rotations[t].to(device),
+                                       s.motion.translation[t].to(device),
+                                       s.posed.joint_transforms[t].to(device),
+                                       s.posed.joint_positions[t].to(device)).float()
+            if handler is not None:
+                vertices = handler.correct(vertices, edges.to(device),
+                                           s.posed.joint_transforms[t].to(device),
+                                           s.posed.joint_positions[t].to(device)).vertices
+            elif collisions == "exact":
+                exact = exact_signed_distance(s.posed.vertices[t], body.faces)
+                vertices = resolve_collisions(vertices.double(), edges, exact).vertices.float()
+            seconds.append(time.perf_counter() - start)
+            frames.append(vertices.cpu())
+        predicted = torch.stack(frames)
+        errors[s.id] = _distance_mm(predicted, s.truth)
+        if collisions is not None:
+            for t in range(len(predicted)):
+                surface = BodySurface(s.posed.vertices[t].double().numpy(), body.faces.numpy())
+                inside += int((surface.signed_distance(predicted[t].double().numpy())[0] > 0).sum())
+                total += predicted.shape[1]
+    extra = {"precision": precision}
+    if collisions is not None:
+        extra["inside_percent"] = 100.0 * inside / max(total, 1)
+    return MethodResult(name, "estimator", errors, seconds, extra)
+
+
+def evaluate_simulator(sequences: list[TestSequence], substeps: int, iterations: int,
+                       body) -> MethodResult:
+    """The simulator re-run on each sequence with other substeps and iterations
+    (all else as stored), against the stored ground truth."""
+    from swingar_pyg.sim import XPBDSettings
+    from swingar_pyg.world.sequence import simulate_sequence
+
+    errors, seconds, strain = {}, [], 0.0
+    for s in sequences:
+        stored = {**s.settings, "gravity": tuple(s.settings["gravity"])}
+        settings = XPBDSettings(**{**stored, "substeps": substeps, "iterations": iterations})
+        result = simulate_sequence(body, s.body_shape, s.garment, s.motion, settings).result
+        errors[s.id] = _distance_mm(result.positions, s.truth)
+        seconds.extend(result.seconds_per_frame.tolist())
+        strain = max(strain, float(result.max_stretch.max()))
+    reference = sequences[0].settings
+    same = (substeps, iterations) == (reference["substeps"], reference["iterations"])
+    return MethodResult(f"simulator {substeps}x{iterations}", "simulator", errors, seconds,
+                        {"substeps": substeps, "iterations": iterations, "max_strain": strain,
+                         "is_ground_truth_setting": same})
+
+
+def equal_error_speedup(estimator: MethodResult, simulator: list[MethodResult]) -> dict:
+    """How much faster the estimator is than the simulator at the estimator's
+    mean error, interpolating the simulator's (log time, log error) curve;
+    ``None`` where the error lies outside the curve's range."""
+    points = sorted((r.stats()["mean_mm"], r.ms_per_frame) for r in simulator
+                    if r.stats()["mean_mm"] > 0)
+    error = estimator.stats()["mean_mm"]
+    if len(points) < 2 or not points[0][0] <= error <= points[-1][0]:
+        return {"simulator_ms_at_equal_error": None, "speedup": None,
+                "note": f"{error:.1f} mm lies outside the simulator's "
+                        f"{points[0][0]:.1f}-{points[-1][0]:.1f} mm" if points else "no curve"}
+    errors, times = np.log([p[0] for p in points]), np.log([p[1] for p in points])
+    # error falls as time grows: interpolate log time over increasing log error
+    simulator_ms = float(np.exp(np.interp(np.log(error), errors, times)))
+    return {"simulator_ms_at_equal_error": simulator_ms,
+            "speedup": simulator_ms / estimator.ms_per_frame}

@@ -1,0 +1,321 @@
+"""``swingar report -c configs/report/<name>.yaml``: error against run time,
+ablations and the stability suite, measured in one run and written to one
+folder (Markdown, CSV, PNG, JSON).
+
+The config names a test split (through its dataset config, generated if
+missing), the trained models (each a stack of training configs and seeds; a
+missing checkpoint is trained first when ``train_missing``), the precisions and
+collision passes to evaluate them with, the simulator settings to place
+against them, the garment sizes to stream, and the stability suite's size. See
+``configs/report/quickstart.yaml``.
+"""
+
+from __future__ import annotations
+
+import glob
+import platform
+import time
+from dataclasses import dataclass, field
+from importlib import metadata
+from pathlib import Path
+
+import numpy as np
+import torch
+
+@dataclass(frozen=True)
+class ModelSpec:
+    """A trained estimator: its training configs (layered), seeds, and the
+    collision passes to evaluate it with (``none``, ``exact``, ``neural``)."""
+
+    name: str
+    configs: tuple[str, ...]
+    seeds: tuple[int, ...] = (0,)
+    collisions: tuple[str, ...] = ("none",)
+
+
+@dataclass(frozen=True)
+class ReportConfig:
+    name: str
+    output: str
+    dataset: str
+    models: tuple[ModelSpec, ...]
+    precisions: tuple[str, ...] = ("fp32",)
+    body_sdf: tuple[str, ...] | None = None
+    train_missing: bool = True
+    simulator_settings: tuple[tuple[int, int], ...] = ((5, 2), (10, 2), (20, 2), (50, 2))
+    simulator_sequences: int = 4
+    streaming_vertices: tuple[int, ...] = (1000, 5000, 20000)
+    streaming_frames: int = 60
+    stability: str = "full"
+    extra_tests: dict = field(default_factory=dict)
+    test_sequences: int | None = None
+
+    @classmethod
+    def from_yaml(cls, path: str | Path) -> "ReportConfig":
+        import yaml
+
+        raw = yaml.safe_load(Path(path).read_text())
+        try:
+            models = tuple(ModelSpec(m["name"], tuple(m["configs"]),
+                                     tuple(m.get("seeds", (0,))),
+                                     tuple(m.get("collisions", ("none",))))
+                           for m in raw["models"])
+            simulator = raw.get("simulator", {})
+            streaming = raw.get("streaming", {})
+            config = cls(
+                name=str(raw["name"]), output=str(raw["output"]), dataset=str(raw["dataset"]),
+                models=models, precisions=tuple(raw.get("precisions", ("fp32",))),
+                body_sdf=_stack(raw.get("body_sdf")),
+                train_missing=bool(raw.get("train_missing", True)),
+                simulator_settings=tuple(tuple(s) for s in simulator.get(
+                    "settings", cls.simulator_settings)),
+                simulator_sequences=int(simulator.get("sequences", cls.simulator_sequences)),
+                streaming_vertices=tuple(streaming.get("vertices", cls.streaming_vertices)),
+                streaming_frames=int(streaming.get("frames", cls.streaming_frames)),
+                stability=str(raw.get("stability", "full")),
+                extra_tests=dict(raw.get("extra_tests", {})),
+                test_sequences=raw.get("test_sequences"))
+        except KeyError as missing:
+            raise ValueError(f"{path}: the report config needs {missing}") from None
+        except TypeError as error:
+            raise ValueError(f"{path}: {error}") from None
+        for model in config.models:
+            unknown = set(model.collisions) - {"none", "exact", "neural"}
+            if unknown:
+                raise ValueError(f"{path}: model {model.name!r} asks for collision passes "
+                                 f"{sorted(unknown)}; use none, exact or neural")
+            if "neural" in model.collisions and config.body_sdf is None:
+                raise ValueError(f"{path}: model {model.name!r} asks for the neural collision "
+                                 "pass but the report names no body_sdf config")
+        if config.stability not in ("full", "small", "off"):
+            raise ValueError(f"{path}: stability must be full, small or off")
+        return config
+
+
+def _stack(configs) -> tuple[str, ...] | None:
+    if configs is None:
+        return None
+    return (configs,) if isinstance(configs, str) else tuple(configs)
+
+
+# ------------------------------------------------------------------ checkpoints
+
+def _run_folder(configs: tuple[str, ...], seed: int) -> tuple[Path, list[str]]:
+    """The run folder of a training config stack at ``seed``, and the CLI
+    arguments that train it there."""
+    import yaml
+
+    root = None
+    for path in configs:
+        trainer = (yaml.safe_load(Path(path).read_text()) or {}).get("trainer") or {}
+        root = trainer.get("default_root_dir", root)
+    if root is None:
+        raise ValueError(f"{' + '.join(configs)} names no trainer.default_root_dir")
+    folder = Path(root) if seed == 0 else Path(f"{root}-seed{seed}")
+    arguments = [a for path in configs for a in ("-c", path)]
+    arguments += ["--seed_everything", str(seed), "--trainer.default_root_dir", str(folder)]
+    return folder, arguments
+
+
+def _best_checkpoint(folder: Path) -> str | None:
+    found = sorted(glob.glob(str(folder / "checkpoints" / "best-*.ckpt")),
+                   key=lambda p: Path(p).stat().st_mtime)
+    return found[-1] if found else None
+
+
+def ensure_checkpoint(configs: tuple[str, ...], seed: int, train_missing: bool) -> str:
+    """The best checkpoint of a config stack and seed; a run that is missing or
+    was cut off before its ``max_steps`` is trained first (resuming
+    ``last.ckpt``) when ``train_missing``."""
+    from swingar_pyg.training.cli import build_cli
+
+    folder, arguments = _run_folder(configs, seed)
+    last = folder / "checkpoints" / "last.ckpt"
+    best = _best_checkpoint(folder)
+    if best is not None and last.exists() and _finished(last, configs):
+        return best
+    if not train_missing:
+        raise ValueError(f"no finished run under {folder}; train it with `swingar fit "
+                         f"{' '.join(arguments)}` or set train_missing")
+    cli = build_cli(arguments, run=False)
+    cli.trainer.fit(cli.model, datamodule=cli.datamodule,
+                    ckpt_path=str(last) if last.exists() else None)
+    best = _best_checkpoint(folder)
+    if best is None:
+        raise ValueError(f"training under {folder} wrote no best checkpoint")
+    return best
+
+
+def _finished(last: Path, configs: tuple[str, ...]) -> bool:
+    """Whether the run of ``last.ckpt`` reached the configs' ``max_steps``."""
+    import yaml
+
+    steps = None
+    for path in configs:
+        trainer = (yaml.safe_load(Path(path).read_text()) or {}).get("trainer") or {}
+        steps = trainer.get("max_steps", steps)
+    saved = torch.load(last, map_location="cpu", weights_only=False)
+    return steps is None or steps < 0 or saved.get("global_step", 0) >= steps
+
+
+# ------------------------------------------------------------------ the run
+
+def _machine() -> dict:
+    versions = {}
+    for package in ("torch", "torch-geometric", "lightning", "numpy", "scipy", "trimesh",
+                    "anny", "swingar-pyg"):
+        try:
+            versions[package] = metadata.version(package)
+        except metadata.PackageNotFoundError:
+            versions[package] = None
+    return {"platform": platform.platform(), "processor": platform.processor() or
+            platform.machine(), "torch_threads": torch.get_num_threads(),
+            "python": platform.python_version(), "versions": versions,
+            "date": time.strftime("%Y-%m-%d %H:%M:%S %Z")}
+
+
+def _test_split(dataset: str) -> Path:
+    from swingar_pyg.world.dataset import DatasetConfig, make_dataset
+
+    config = DatasetConfig.from_yaml(dataset)
+    path = Path(config.output) / "test.h5"
+    if not path.exists():
+        make_dataset(config, workers=2)
+    return path
+
+
+def _streaming_fps(estimator, body, vertices: tuple[int, ...], frames: int) -> list[dict]:
+    from swingar_pyg.prediction import garment_graph
+    from swingar_pyg.world.garment import SkirtSpec, fit_procedural_skirt
+    from swingar_pyg.world.motion_library import make_motion
+
+    shape = body.default_shape()
+    motion = make_motion("walk", body, shape, seconds=frames / 30.0)
+    posed = body.pose(shape, motion.rotations, motion.translation)
+    rows = []
+    for count in vertices:
+        skirt = fit_procedural_skirt(SkirtSpec(length=0.8, vertices=count), body, shape)
+        graph = garment_graph(skirt, len(body.joint_names), estimator.descriptor_size)
+        stream = estimator.stream(graph, shape, motion.fps)
+        seconds = []
+        for t in range(motion.num_frames):
+            start = time.perf_counter()
+            stream.step(motion.rotations[t], motion.translation[t], posed.joint_transforms[t],
+                        posed.joint_positions[t])
+            seconds.append(time.perf_counter() - start)
+        ms = 1e3 * float(np.median(seconds[1:]))
+        rows.append({"vertices": skirt.mesh.num_vertices, "ms_per_frame": ms, "fps": 1e3 / ms})
+    return rows
+
+
+def run_report(config: ReportConfig, progress: bool = True, log=print) -> Path:
+    """Measures everything the config asks for and writes the report folder;
+    returns the path of ``report.md``."""
+    from swingar_pyg.collision import NeuralCollisions
+    from swingar_pyg.eval.error_vs_time import (
+        equal_error_speedup,
+        evaluate_estimator,
+        evaluate_rigid,
+        evaluate_simulator,
+        load_test_sequences,
+    )
+    from swingar_pyg.prediction import load_estimator
+    from swingar_pyg.world.body import AnnyBody
+
+    out = Path(config.output)
+    started = time.perf_counter()
+    body = AnnyBody()
+    test_path = _test_split(config.dataset)
+    sequences = load_test_sequences(test_path, body, config.test_sequences)
+    log(f"test split {test_path}: {len(sequences)} sequences")
+    body_sdf = None
+    if config.body_sdf is not None and any("neural" in m.collisions for m in config.models):
+        body_sdf = ensure_checkpoint(config.body_sdf, 0, config.train_missing)
+    handlers: dict = {}
+
+    def neural(shape):
+        key = tuple(shape.tolist())
+        if key not in handlers:
+            handlers[key] = NeuralCollisions.from_checkpoint(body_sdf, body, shape)
+        return handlers[key]
+
+    results, checkpoints, per_model = [], {}, {}
+    first_estimator = None
+    for model in config.models:
+        for seed in model.seeds:
+            checkpoint = ensure_checkpoint(model.configs, seed, config.train_missing)
+            checkpoints[f"{model.name} (seed {seed})"] = checkpoint
+            estimator, data = load_estimator(checkpoint)
+            first_estimator = first_estimator or estimator
+            # every precision without collision handling, the collision passes at the first
+            variants = [(p, "none") for p in config.precisions if "none" in model.collisions]
+            variants += [(config.precisions[0], c) for c in model.collisions if c != "none"]
+            for precision, pass_ in variants:
+                label = _label(model.name, precision, pass_)
+                log(f"estimator: {label}, seed {seed}")
+                collisions = {"none": None, "exact": "exact", "neural": neural}[pass_]
+                result = evaluate_estimator(label, estimator, sequences, data.get("sigma", 0.1),
+                                            data.get("seed", 0), precision, collisions, body)
+                result.extra.update(model=model.name, seed=seed, collisions=pass_)
+                if seed == model.seeds[0]:
+                    results.append(result)
+                per_model.setdefault(label, []).append(result)
+    rigid = evaluate_rigid(sequences)
+    log("simulator at other settings")
+    chosen = _spread(sequences, config.simulator_sequences)
+    simulator = [evaluate_simulator(chosen, s, i, body) for s, i in config.simulator_settings]
+    speedups = {r.name: equal_error_speedup(_restricted(r, chosen), simulator)
+                for r in results}
+    streaming = (_streaming_fps(first_estimator, body, config.streaming_vertices,
+                                config.streaming_frames) if first_estimator else [])
+    extra = {}
+    for name, path in config.extra_tests.items():
+        extra_sequences = load_test_sequences(path, body)
+        first = config.models[0]
+        estimator, data = load_estimator(checkpoints[f"{first.name} (seed {first.seeds[0]})"])
+        extra[name] = {"estimator": evaluate_estimator(first.name, estimator, extra_sequences,
+                                                       data.get("sigma", 0.1),
+                                                       data.get("seed", 0)).row(),
+                       "rigid": evaluate_rigid(extra_sequences).row()}
+    stability = []
+    if config.stability != "off":
+        from swingar_pyg.eval.stability import FULL, SMALL, run_stability
+
+        log("stability suite")
+        stability = run_stability(FULL if config.stability == "full" else SMALL,
+                                  first_estimator, body_sdf, progress=progress)
+    from swingar_pyg.eval.report_writer import write_report
+
+    return write_report(out, config, machine=_machine(), test_path=test_path,
+                        sequences=sequences, results=results, per_model=per_model,
+                        rigid=rigid, simulator=simulator, simulated=chosen, speedups=speedups,
+                        streaming=streaming, extra=extra, stability=stability,
+                        checkpoints=checkpoints, body_sdf=body_sdf,
+                        seconds=time.perf_counter() - started)
+
+
+def _label(name: str, precision: str, collisions: str) -> str:
+    parts = [name]
+    if precision != "fp32":
+        parts.append(precision)
+    if collisions != "none":
+        parts.append(f"+ {collisions} collisions")
+    return " ".join(parts)
+
+
+def _spread(sequences: list, count: int) -> list:
+    """``count`` sequences spread over the garments and motions of the split."""
+    by_pair: dict = {}
+    for s in sequences:
+        by_pair.setdefault((s.garment.name.split("@")[0], s.motion.name), s)
+    chosen = list(by_pair.values())
+    return chosen[:count] if count < len(chosen) else chosen
+
+
+def _restricted(result, sequences):
+    """``result`` on ``sequences`` only (the ones the simulator re-ran)."""
+    from swingar_pyg.eval.error_vs_time import MethodResult
+
+    keep = {s.id for s in sequences}
+    return MethodResult(result.name, result.kind, {k: v for k, v in result.errors.items()
+                                                   if k in keep}, result.seconds, result.extra)

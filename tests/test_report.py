@@ -1,0 +1,127 @@
+import csv
+
+import numpy as np
+import pytest
+import torch
+
+from tests.windows import SMALL_ESTIMATOR, SMALL_FEATURES
+
+pytest.importorskip('anny')
+pytest.importorskip('lightning')
+
+TINY_TRAINING = """
+trainer:
+  max_steps: 3
+  val_check_interval: 3
+  limit_val_batches: 1
+  log_every_n_steps: 1
+  enable_progress_bar: false
+  enable_model_summary: false
+  default_root_dir: {root}/estimator
+model:
+  estimator: {{init_args: {estimator}}}
+data:
+  init_args: {{config: {dataset}, batch_size: 2, {features}}}
+"""
+
+TINY_REPORT = """
+name: tiny
+output: {root}/report
+dataset: {dataset}
+body_sdf: [configs/body_sdf.yaml, {body_sdf}]
+models:
+  - name: tiny estimator
+    configs: [configs/quickstart.yaml, {root}/training.yaml]
+    collisions: [none, exact, neural]
+precisions: [fp32, bf16]
+train_missing: true
+simulator: {{settings: [[5, 2], [10, 2]], sequences: 1}}
+streaming: {{vertices: [150], frames: 4}}
+stability: "off"
+"""
+
+
+def sdf_config_of(tiny_body_sdf):
+    return tiny_body_sdf.parents[1] / 'tiny_sdf.yaml'
+
+
+def test_report_measures_every_method_on_the_same_sequences(tiny_windows, tiny_body_sdf,
+                                                            tmp_path):
+    import h5py
+
+    from swingar_pyg.eval.report import ReportConfig, run_report
+
+    (tmp_path / 'training.yaml').write_text(TINY_TRAINING.format(
+        root=tmp_path, dataset=tiny_windows.hparams.config,
+        estimator='{' + ', '.join(f'{k}: {v}' for k, v in SMALL_ESTIMATOR.items()) + '}',
+        features=', '.join(f'{k}: {v}' for k, v in SMALL_FEATURES.items())))
+    # the body SDF config of the tiny_body_sdf fixture, whose run is finished: reused
+    sdf_stack = tmp_path / 'sdf_stack.yaml'
+    sdf_stack.write_text(sdf_config_of(tiny_body_sdf).read_text())
+    report_yaml = tmp_path / 'report.yaml'
+    report_yaml.write_text(TINY_REPORT.format(root=tmp_path, dataset=tiny_windows.hparams.config,
+                                              body_sdf=sdf_stack))
+    config = ReportConfig.from_yaml(report_yaml)
+    report = run_report(config, progress=False, log=lambda *_: None)
+    text = report.read_text()
+    for heading in ('## Error against run time', '## Per garment and per motion',
+                    '## Streaming speed', '## Reproduce'):
+        assert heading in text
+    for name in ('error_vs_time.png', 'per_garment.png', 'distributions.png', 'streaming.png',
+                 'report.json', 'per_garment.csv', 'per_motion.csv'):
+        assert (report.parent / name).exists(), name
+    rows = list(csv.DictReader((report.parent / 'error_vs_time.csv').read_text().splitlines()))
+    methods = [row['method'] for row in rows]
+    assert methods == ['tiny estimator', 'tiny estimator bf16',
+                       'tiny estimator + exact collisions', 'tiny estimator + neural collisions',
+                       'rigid skinning', 'simulator 5x2', 'simulator 10x2']
+    by_method = {row['method']: row for row in rows}
+    # the exact pass leaves nothing inside (the network only tries to)
+    assert float(by_method['tiny estimator + exact collisions']['inside_percent']) == 0.0
+    # rigid skinning, re-skinned here, against the rigid garment the simulator stored
+    with h5py.File(tiny_windows.split_path('test'), 'r') as file:
+        errors = [np.linalg.norm(g['rigid_vertices'][:] - g['garment_vertices'][:], axis=-1)
+                  for g in file['sequences'].values()]
+    stored = 1e3 * float(np.concatenate([e.ravel() for e in errors]).mean())
+    assert float(by_method['rigid skinning']['mean_mm']) == pytest.approx(stored, rel=1e-3)
+    # the simulator at the setting that made the data reproduces it up to float32 rounding
+    assert by_method['simulator 10x2']['is_ground_truth_setting'] == 'True'
+    assert float(by_method['simulator 10x2']['mean_mm']) < 0.1 * float(
+        by_method['simulator 5x2']['mean_mm'])
+    # a finished run is reused: a second report trains nothing
+    stamp = (tmp_path / 'estimator' / 'checkpoints' / 'last.ckpt').stat().st_mtime_ns
+    run_report(config, progress=False, log=lambda *_: None)
+    assert (tmp_path / 'estimator' / 'checkpoints' / 'last.ckpt').stat().st_mtime_ns == stamp
+
+
+def test_equal_error_speedup_interpolates_the_simulator_curve():
+    from swingar_pyg.eval.error_vs_time import MethodResult, equal_error_speedup
+
+    def point(name, error_mm, ms):
+        return MethodResult(name, 'simulator', {'a': torch.full((2, 3), error_mm)}, [ms / 1e3])
+
+    curve = [point('coarse', 40.0, 10.0), point('fine', 4.0, 1000.0)]
+    # 12.65 mm is the geometric mean of 40 and 4: halfway in log space, so 100 ms
+    result = equal_error_speedup(point('estimator', float(np.sqrt(160.0)), 5.0), curve)
+    assert result['simulator_ms_at_equal_error'] == pytest.approx(100.0, rel=1e-6)
+    assert result['speedup'] == pytest.approx(20.0, rel=1e-6)
+    outside = equal_error_speedup(point('estimator', 1.0, 5.0), curve)
+    assert outside['speedup'] is None and 'outside' in outside['note']
+
+
+def test_report_configs_parse_and_bad_ones_are_refused(tmp_path):
+    from swingar_pyg.eval.report import ReportConfig
+
+    for name in ('quickstart', 'ablations'):
+        config = ReportConfig.from_yaml(f'configs/report/{name}.yaml')
+        assert config.models and config.output.startswith('runs/report/')
+    ablations = ReportConfig.from_yaml('configs/report/ablations.yaml')
+    assert ablations.stability == 'off' and len(ablations.models) == 7
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text('name: x\noutput: y\ndataset: z\nmodels: [{name: m, configs: [c], '
+                   'collisions: [neural]}]\n')
+    with pytest.raises(ValueError, match='names no body_sdf'):
+        ReportConfig.from_yaml(bad)
+    bad.write_text('name: x\noutput: y\nmodels: []\n')
+    with pytest.raises(ValueError, match="needs 'dataset'"):
+        ReportConfig.from_yaml(bad)
