@@ -29,7 +29,7 @@ def shipped_clips() -> list[str]:
 
 def make_motion(source: str, body: BodyModel, shape: torch.Tensor, seconds: float | None = None,
                 fps: float = 30.0, speed: float = 1.0, amplitude: float = 1.0,
-                mirror: bool = False) -> Motion:
+                mirror: bool = False, joint_map: dict[str, str] | None = None) -> Motion:
     """A motion for ``body`` from ``source``: a procedural family (see
     :data:`~swingar_pyg.world.motion.PROCEDURAL_MOTIONS`, or a stress case of
     :data:`~swingar_pyg.world.motion.EXTREME_MOTIONS`), a shipped clip name
@@ -39,7 +39,9 @@ def make_motion(source: str, body: BodyModel, shape: torch.Tensor, seconds: floa
     dropped, and the clip is eased into from the body's rest pose over 0.5 s (see
     :func:`~swingar_pyg.world.motion.ease_from_rest`); the result is cut to
     ``seconds`` (all of it if ``None`` or longer). ``speed`` plays it faster or
-    slower; ``amplitude`` applies to procedural motions only.
+    slower; ``amplitude`` applies to procedural motions only. ``joint_map`` names
+    clip joints for the body (:func:`~swingar_pyg.world.retarget.retarget`; e.g.
+    :data:`~swingar_pyg.world.smpl_body.CMU_TO_SMPL`).
     """
     if source in PROCEDURAL_MOTIONS + EXTREME_MOTIONS:
         return procedural_motion(source, body.joint_names, seconds=seconds or 4.0, fps=fps,
@@ -61,7 +63,8 @@ def make_motion(source: str, body: BodyModel, shape: torch.Tensor, seconds: floa
                          f"({', '.join(PROCEDURAL_MOTIONS)}), a shipped clip "
                          f"({', '.join(shipped_clips())}) or a .bvh path")
     # Playing at `speed` is sampling the clip at fps / speed and calling it fps.
-    motion = retarget(clip, body, shape, fps=fps / speed, name=Path(source).stem)
+    motion = retarget(clip, body, shape, fps=fps / speed, joint_map=joint_map,
+                      name=Path(source).stem)
     motion = ease_from_rest(Motion(f"{motion.name}-s{speed:.2f}", motion.rotations[1:],
                                    motion.translation[1:], fps, motion.joint_names))
     if seconds is not None:
