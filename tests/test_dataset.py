@@ -90,3 +90,21 @@ def test_shards_split_the_jobs_and_merge_when_all_are_done(tmp_path):
     assert (tmp_path / 'data' / 'train.h5').exists() and (tmp_path / 'data' / 'test.h5').exists()
     with pytest.raises(ValueError, match='shard must be i/n'):
         make_dataset(config, shard=(2, 2), progress=False)
+
+
+def test_configs_take_dresses_and_shipped_garments(tmp_path):
+    from swingar_pyg.world.garment import DressSpec, ShippedGarmentSpec, SkirtSpec
+
+    text = TINY.replace('garments: [{{length: 0.6, flare: 0.4, vertices: 130}}]',
+                        'garments: [{{kind: dress, length: 0.9, vertices: 300}}, '
+                        '{{kind: shipped, name: overall_jumpsuit, subdivisions: 1}}]')
+    config = tiny_config(tmp_path, text)
+    assert config.garments['test'] == (DressSpec(length=0.9, vertices=300),
+                                       ShippedGarmentSpec('overall_jumpsuit', 1))
+    assert isinstance(config.garments['train'][0], SkirtSpec)
+    assert DressSpec(length=0.9, vertices=300).name.startswith('dress-')
+    assert len(plan_jobs(config)) == 4
+    with pytest.raises(ValueError, match="unknown garment kind 'cape'"):
+        tiny_config(tmp_path, TINY.replace('{{length: 0.6,', '{{kind: cape, length: 0.6,'))
+    with pytest.raises(ValueError, match='subdivisions'):
+        ShippedGarmentSpec('overall_jumpsuit', 5)

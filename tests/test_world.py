@@ -201,3 +201,22 @@ def test_the_waistband_follows_the_pelvis_not_the_thighs(anny_body):
     free = np.setdiff1d(np.arange(garment.mesh.num_vertices), garment.pinned)
     legs = {names[j] for j in garment.skin_indices[free].ravel()}
     assert any('Leg' in n for n in legs)  # the rest of the skirt keeps the body's weights
+
+
+def test_dress_hangs_from_the_chest_and_shipped_garments_pin_all_their_top_loops():
+    pytest.importorskip('anny')
+    from swingar_pyg.world.body import AnnyBody
+    from swingar_pyg.world.garment import DressSpec, ShippedGarmentSpec, fit_garment
+
+    body = AnnyBody()
+    shape = body.default_shape()
+    dress = fit_garment(DressSpec(length=0.9, vertices=400), body, shape)
+    top = dress.mesh.vertices[dress.pinned, 2]
+    assert np.allclose(top, DressSpec().waist_height) and dress.fit.min() > 0
+    jumpsuit = fit_garment(ShippedGarmentSpec('overall_jumpsuit'), body, shape)
+    finer = fit_garment(ShippedGarmentSpec('overall_jumpsuit', subdivisions=1), body, shape)
+    assert finer.mesh.num_faces == 4 * jumpsuit.mesh.num_faces
+    assert finer.name.endswith('-s1')
+    # the bib's top edge (292 vertices) and the eight strap ends (4 x 8 + 4 x 7), not only
+    # the highest loop; the legs' hems (18 each, 1.2 m lower) stay free
+    assert len(jumpsuit.pinned) == 292 + 4 * 8 + 4 * 7

@@ -3,7 +3,8 @@ ablations and the stability suite, measured in one run and written to one
 folder (Markdown, CSV, PNG, JSON).
 
 The config names a test split (through its dataset config, generated if
-missing), the trained models (each a stack of training configs and seeds; a
+missing; ``extra_tests`` adds other test splits, e.g. a garment type never
+trained on, evaluated on the first model), the trained models (each a stack of training configs and seeds; a
 missing checkpoint is trained first when ``train_missing``), the precisions and
 collision passes to evaluate them with, the simulator settings to place
 against them, the garment sizes to stream, and the stability suite's size. See
@@ -269,8 +270,8 @@ def run_report(config: ReportConfig, progress: bool = True, log=print) -> Path:
     streaming = (_streaming_fps(first_estimator, body, config.streaming_vertices,
                                 config.streaming_frames) if first_estimator else [])
     extra = {}
-    for name, path in config.extra_tests.items():
-        extra_sequences = load_test_sequences(path, body)
+    for name, dataset in config.extra_tests.items():
+        extra_sequences = load_test_sequences(_test_split(dataset), body)
         first = config.models[0]
         estimator, data = load_estimator(checkpoints[f"{first.name} (seed {first.seeds[0]})"])
         extra[name] = {"estimator": evaluate_estimator(first.name, estimator, extra_sequences,

@@ -24,7 +24,7 @@ import numpy as np
 
 from swingar_pyg.atomic import atomic_path
 from swingar_pyg.sim.xpbd import XPBDSettings
-from swingar_pyg.world.garment import SkirtSpec
+from swingar_pyg.world.garment import garment_spec
 from swingar_pyg.world.sequence_file import merge_sequence_files, write_sequences
 
 SPLITS = ("train", "val", "test")
@@ -50,7 +50,7 @@ class DatasetConfig:
     seconds: float
     fps: float
     body_shapes: tuple[tuple[float, ...], ...]
-    garments: dict[str, tuple[SkirtSpec, ...]]
+    garments: dict[str, tuple]
     motions: dict[str, tuple[MotionSpec, ...]]
     solver: XPBDSettings
 
@@ -68,7 +68,7 @@ class DatasetConfig:
                 name=str(raw["name"]), output=str(raw["output"]),
                 seconds=float(raw["seconds"]), fps=float(raw.get("fps", 30.0)),
                 body_shapes=tuple(tuple(float(v) for v in s) for s in raw["body_shapes"]),
-                garments={split: tuple(SkirtSpec(**g) for g in spec["garments"])
+                garments={split: tuple(garment_spec(g) for g in spec["garments"])
                           for split, spec in splits.items()},
                 motions={split: tuple(MotionSpec(**m) for m in spec["motions"])
                          for split, spec in splits.items()},
@@ -84,7 +84,7 @@ class DatasetConfig:
 class Job:
     split: str
     index: int
-    garment: SkirtSpec
+    garment: object
     motion: MotionSpec
     shape_index: int
     shape: tuple[float, ...]
@@ -121,14 +121,14 @@ def _run_job(job: Job, fps: float, seconds: float, solver: XPBDSettings, part: s
     import torch
 
     from swingar_pyg.world.body import AnnyBody
-    from swingar_pyg.world.garment import fit_procedural_skirt
+    from swingar_pyg.world.garment import fit_garment
     from swingar_pyg.world.motion_library import make_motion
     from swingar_pyg.world.sequence import simulate_sequence
 
     torch.set_num_threads(1)
     body = AnnyBody()
     shape = torch.tensor(job.shape)
-    garment = fit_procedural_skirt(job.garment, body, shape)
+    garment = fit_garment(job.garment, body, shape)
     garment = dataclasses.replace(garment, name=f"{garment.name}@shape{job.shape_index}")
     motion = make_motion(job.motion.kind, body, shape, seconds=seconds, fps=fps,
                          speed=job.motion.speed, amplitude=job.motion.amplitude,

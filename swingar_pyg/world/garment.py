@@ -87,7 +87,68 @@ class SkirtSpec:
     @property
     def name(self) -> str:
         kind = "irregular" if self.jitter > 0 else "grid"
-        return f"skirt-l{self.length:.2f}-f{self.flare:.2f}-n{self.vertices}-{kind}"
+        return f"{self.family}-l{self.length:.2f}-f{self.flare:.2f}-n{self.vertices}-{kind}"
+
+    @property
+    def family(self) -> str:
+        return "skirt"
+
+
+@dataclass(frozen=True)
+class DressSpec(SkirtSpec):
+    """A procedural strapless dress: a skirt that starts under the arms.
+
+    Its top ring, pinned to the torso, sits ``waist_height`` above the hips (the
+    chest); below, it follows the torso's envelope and never narrows below its
+    widest point, so it hangs from the bust as a shift dress and flares from
+    the hips.
+    """
+
+    length: float = 0.95
+    flare: float = 0.25
+    waist_height: float = 0.30
+
+    @property
+    def family(self) -> str:
+        return "dress"
+
+
+@dataclass(frozen=True)
+class ShippedGarmentSpec:
+    """A shipped MakeHuman garment (:func:`~swingar_pyg.world.garment_assets.shipped_garments`)
+    carried onto the body, its triangles split ``subdivisions`` times (4x the
+    faces each) for other resolutions of the same topology."""
+
+    name: str
+    subdivisions: int = 0
+
+    def __post_init__(self):
+        if not 0 <= self.subdivisions <= 3:
+            raise ValueError(f"subdivisions must be in [0, 3], got {self.subdivisions}")
+
+
+def garment_spec(entry: dict):
+    """A garment of a dataset config: ``{kind: skirt | dress | shipped, ...}``
+    (``skirt`` when no kind is given) with the fields of :class:`SkirtSpec`,
+    :class:`DressSpec` or :class:`ShippedGarmentSpec`."""
+    entry = dict(entry)
+    kind = entry.pop("kind", "skirt")
+    kinds = {"skirt": SkirtSpec, "dress": DressSpec, "shipped": ShippedGarmentSpec}
+    if kind not in kinds:
+        raise ValueError(f"unknown garment kind {kind!r}; use {', '.join(kinds)}")
+    return kinds[kind](**entry)
+
+
+def fit_garment(spec, body: "BodyModel", shape) -> Garment:
+    """Any garment spec fitted on ``body`` with ``shape`` in its rest pose."""
+    if isinstance(spec, ShippedGarmentSpec):
+        from swingar_pyg.world.garment_assets import fit_shipped_garment
+
+        garment = fit_shipped_garment(spec.name, body, shape, spec.subdivisions)
+        suffix = f"-s{spec.subdivisions}" if spec.subdivisions else ""
+        return Garment(garment.name + suffix, garment.mesh, garment.pinned, garment.skin_indices,
+                       garment.skin_weights, garment.fit)
+    return fit_procedural_skirt(spec, body, shape)
 
 
 def body_envelope(vertices: np.ndarray, keep: np.ndarray, heights: np.ndarray,
@@ -220,8 +281,10 @@ def _interpolate_rings(radius: np.ndarray, ring_position: np.ndarray,
     return top * (1 - fr) + bottom * fr
 
 
-def top_boundary_loop(mesh: Mesh) -> np.ndarray:
-    """Vertices of the mesh's highest boundary loop (a waistband or a neckline)."""
+def top_boundary_loops(mesh: Mesh, band: float = 0.1) -> np.ndarray:
+    """Vertices of the mesh's boundary loops whose mean height lies within ``band``
+    of the highest one's: a waistband, a neckline, or the top edge of a bib and
+    the ends of its straps."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
@@ -232,19 +295,22 @@ def top_boundary_loop(mesh: Mesh) -> np.ndarray:
     graph = coo_matrix((np.ones(len(boundary)), (boundary[:, 0], boundary[:, 1])), shape=(n, n))
     _, label = connected_components(graph, directed=False)
     on_boundary = np.unique(boundary)
-    loops = {k: on_boundary[label[on_boundary] == k] for k in np.unique(label[on_boundary])}
-    return max(loops.values(), key=lambda loop: mesh.vertices[loop, 2].mean())
+    loops = [on_boundary[label[on_boundary] == k] for k in np.unique(label[on_boundary])]
+    heights = [mesh.vertices[loop, 2].mean() for loop in loops]
+    top = max(heights)
+    return np.sort(np.concatenate([loop for loop, z in zip(loops, heights) if z >= top - band]))
 
 
 def garment_on_body(name: str, mesh: Mesh, body: "BodyModel", shape) -> Garment:
     """A garment mesh already dressed on ``body``'s rest pose with ``shape``
-    (metres, +Z up), made ready to animate: pinned at its highest boundary loop
-    (waistband or neckline, skinned to the torso), skinning transferred from the
-    body, and the fit attribute measured on that body."""
+    (metres, +Z up), made ready to animate: pinned at its highest boundary loops
+    (:func:`top_boundary_loops`: waistband, neckline, straps; skinned to the
+    torso), skinning transferred from the body, and the fit attribute measured
+    on that body."""
     mesh = as_mesh(mesh.vertices, mesh.faces)
     rest = body.rest_vertices(shape).numpy().astype(np.float64)
     faces = body.faces.numpy()
-    pinned = top_boundary_loop(mesh)
+    pinned = top_boundary_loops(mesh)
     indices, weights = body.skinning()
     skin_indices, skin_weights = transfer_skinning(mesh.vertices, pinned, rest, body.joint_names,
                                                    indices.numpy(), weights.numpy())

@@ -64,13 +64,23 @@ def _hm08_body() -> np.ndarray:
         return np.load(path).astype(np.float64)
 
 
-def fit_shipped_garment(name: str, body: BodyModel, shape: torch.Tensor) -> Garment:
+def fit_shipped_garment(name: str, body: BodyModel, shape: torch.Tensor,
+                        subdivisions: int = 0) -> Garment:
     """A shipped garment carried onto ``body`` with ``shape``, in its rest pose.
 
-    Pinned: the garment's highest boundary loop (waistband or neckline), skinned to
-    the torso. The fit attribute is measured on the new body.
+    Pinned: the garment's highest boundary loops (waistband, neckline, straps), skinned to
+    the torso. The fit attribute is measured on the new body. ``subdivisions``
+    splits every triangle into four that many times first (trimesh's midpoint
+    subdivision: the same surface at a finer resolution).
     """
     garment = load_shipped_garment(name)
+    if subdivisions:
+        import trimesh
+
+        vertices, faces = garment.vertices, garment.faces
+        for _ in range(subdivisions):
+            vertices, faces = trimesh.remesh.subdivide(vertices, faces)
+        garment = as_mesh(vertices, faces)
     faces = body.faces.numpy()
     hm08 = _hm08_body()
     if faces.max() >= len(hm08):
