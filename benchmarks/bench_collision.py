@@ -256,7 +256,8 @@ def plot(methods: dict, accuracy: dict):
         axes[2].annotate(f"sign {100 * accuracy[case]['sign_accuracy']:.1f} %",
                          (k, accuracy[case]["near_mean_mm"]), ha="center", fontsize=7,
                          xytext=(0, 3), textcoords="offset points")
-    axes[2].set_xticks(range(len(cases)), [c.replace(", ", ",\n") for c in cases], fontsize=7)
+    axes[2].set_xticks(range(len(cases)), [c.replace(", ", ",\n").replace(" (", "\n(")
+                                           for c in cases], fontsize=7)
     axes[2].set(ylabel="mean |S - s| within 2 cm of the surface (mm)", title="neural SDF")
     figure.tight_layout()
     return figure
@@ -274,7 +275,18 @@ def main() -> None:
     parser.add_argument("--offset", type=float, default=0.004,
                         help="fixed offset of the push, and the neural correction's band (m)")
     parser.add_argument("--quick", action="store_true", help="two sequences, every 10th frame")
+    parser.add_argument("--replot", action="store_true",
+                        help="redraw the PNG from the last results/bench_collision.json")
     args = parser.parse_args()
+    if args.replot:
+        import json
+
+        from common import RESULTS
+
+        payload = json.loads((RESULTS / "bench_collision.json").read_text())
+        write_results("bench_collision", payload, plot(payload["methods"],
+                                                       payload["sdf_accuracy"]))
+        return
     if not args.body_sdf:
         raise SystemExit("no body SDF checkpoint: run `swingar fit -c configs/body_sdf.yaml`")
     torch.manual_seed(0)
