@@ -1,6 +1,9 @@
 """Ground-truth cloth simulation (DESIGN §8)."""
 
 from swingar_pyg.sim.collider import BodyCollider
-from swingar_pyg.sim.xpbd import SIMULATOR_REVISION, SimulationResult, XPBDCloth, XPBDSettings
+from swingar_pyg.sim.recording import SimulationResult
+from swingar_pyg.sim.vbd import VBDCloth, VBDSettings
+from swingar_pyg.sim.xpbd import SIMULATOR_REVISION, XPBDCloth, XPBDSettings
 
-__all__ = ["BodyCollider", "SimulationResult", "XPBDCloth", "XPBDSettings"]
+__all__ = ["BodyCollider", "SimulationResult", "VBDCloth", "VBDSettings", "XPBDCloth",
+           "XPBDSettings"]

@@ -20,7 +20,7 @@ swing free (DESIGN §8). Runs on any torch device.
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 
 import numpy as np
 import torch
@@ -28,6 +28,7 @@ from torch import Tensor
 
 from swingar_pyg.geometry.mesh import Mesh
 from swingar_pyg.sim.collider import BodyCollider
+from swingar_pyg.sim.recording import FrameRecorder, SimulationResult, edge_strain
 from swingar_pyg.sim.constraints import (
     DistanceConstraints,
     bending_pairs,
@@ -89,26 +90,6 @@ class XPBDSettings:
             raise ValueError("density must be > 0")
         if not 0 <= self.friction <= 1:
             raise ValueError(f"friction must be in [0, 1], got {self.friction}")
-
-
-@dataclass
-class SimulationResult:
-    """A simulated sequence and how it was obtained.
-
-    Attributes:
-        positions: ``(T, N, 3)`` cloth vertices per output frame.
-        seconds_per_frame: ``(T,)`` wall time of each frame.
-        max_stretch, mean_stretch: ``(T,)`` edge strain ``|l / L - 1|``.
-        penetration: ``(T,)`` fraction of free vertices inside the body (NaN without body).
-        settings: the solver settings.
-    """
-
-    positions: Tensor
-    seconds_per_frame: np.ndarray
-    max_stretch: np.ndarray
-    mean_stretch: np.ndarray
-    penetration: np.ndarray
-    settings: dict = field(default_factory=dict)
 
 
 def vertex_masses(mesh: Mesh, density: float) -> Tensor:
@@ -186,9 +167,7 @@ class XPBDCloth:
         p.add_(push_depth.unsqueeze(-1) * normal - keep.unsqueeze(-1) * slip)
 
     def strain(self, x: Tensor) -> Tensor:
-        pairs = self.stretch.pairs
-        length = (x[pairs[:, 0]] - x[pairs[:, 1]]).norm(dim=-1)
-        return (length / self.stretch.rest_lengths.clamp_min(1e-12) - 1.0).abs()
+        return edge_strain(x, self.stretch)
 
     def simulate(self, initial: Tensor, pin_targets: Tensor,
                  collider: BodyCollider | None = None,
@@ -221,10 +200,8 @@ class XPBDCloth:
         decay = float(np.exp(-s.damping * dt))
         stretch_lagrange = torch.zeros_like(self.stretch.rest_lengths)
         bend_lagrange = torch.zeros_like(self.bend.rest_lengths)
-        positions = torch.empty(frames, n, 3, dtype=self.dtype)
-        seconds = np.zeros(frames)
-        max_stretch, mean_stretch = np.zeros(frames), np.zeros(frames)
-        penetration = np.full(frames, np.nan)
+        recorder = FrameRecorder(frames, n, self.stretch, self.inverse_mass > 0, collider,
+                                 self.dtype)
 
         contact_interval = max(1, s.substeps // s.contacts_per_frame)
         schedule = [0] * s.settle_frames + list(range(frames))
@@ -260,17 +237,9 @@ class XPBDCloth:
                         self._collide(p, x, collider, frame, contact, body_fraction, body_step)
                 v = (p - x) / dt
                 x = p
-            if not torch.isfinite(x).all():
-                raise FloatingPointError(f"cloth state became non-finite at frame {frame}")
             if settling:
+                if not torch.isfinite(x).all():
+                    raise FloatingPointError("cloth state became non-finite while settling")
                 continue
-            positions[frame] = x.cpu()
-            seconds[frame] = time.perf_counter() - start
-            strain = self.strain(x)
-            max_stretch[frame], mean_stretch[frame] = strain.max().item(), strain.mean().item()
-            if collider is not None:
-                free = self.inverse_mass > 0
-                inside = collider.signed_distance(frame, x[free]) < 0
-                penetration[frame] = inside.float().mean().item()
-        return SimulationResult(positions, seconds, max_stretch, mean_stretch, penetration,
-                                asdict(s))
+            recorder.record(frame, x, time.perf_counter() - start)
+        return recorder.result(asdict(s))

@@ -9,6 +9,7 @@ from torch import Tensor
 
 from swingar_pyg.geometry.skinning import linear_blend_skinning
 from swingar_pyg.sim import BodyCollider, SimulationResult, XPBDCloth, XPBDSettings
+from swingar_pyg.sim.vbd import VBDCloth, VBDSettings
 from swingar_pyg.world.body import BodyModel
 from swingar_pyg.world.garment import Garment
 from swingar_pyg.world.motion import Motion
@@ -36,10 +37,11 @@ class SimulatedSequence:
 
 
 def simulate_sequence(body: BodyModel, body_shape: Tensor, garment: Garment, motion: Motion,
-                      settings: XPBDSettings | None = None, device: str = "cpu",
+                      settings: XPBDSettings | VBDSettings | None = None, device: str = "cpu",
                       progress: bool = False) -> SimulatedSequence:
     """Poses the body, drives the garment's pins with the body's skinning, starts
-    the cloth from its rigidly skinned first frame, and simulates."""
+    the cloth from its rigidly skinned first frame, and simulates with the solver the
+    settings are for (:class:`XPBDSettings`, the default, or :class:`VBDSettings`)."""
     settings = settings or XPBDSettings(fps=motion.fps)
     if settings.fps != motion.fps:
         raise ValueError(f"the motion runs at {motion.fps} fps but the simulator at "
@@ -51,7 +53,8 @@ def simulate_sequence(body: BodyModel, body_shape: Tensor, garment: Garment, mot
                                   torch.as_tensor(garment.skin_indices),
                                   torch.as_tensor(garment.skin_weights, dtype=torch.float32),
                                   posed.joint_transforms)
-    cloth = XPBDCloth(garment.mesh, garment.pinned, settings, device=device)
+    solver = VBDCloth if isinstance(settings, VBDSettings) else XPBDCloth
+    cloth = solver(garment.mesh, garment.pinned, settings, device=device)
     collider = BodyCollider(posed.vertices.to(device), body.faces.to(device),
                             thickness=settings.thickness)
     result = cloth.simulate(rigid[0], rigid[:, garment.pinned], collider, progress=progress)

@@ -1,0 +1,76 @@
+"""What every simulator records per output frame, whatever solved it."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from swingar_pyg.sim.collider import BodyCollider
+from swingar_pyg.sim.constraints import DistanceConstraints
+
+
+@dataclass
+class SimulationResult:
+    """A simulated sequence and how it was obtained.
+
+    Attributes:
+        positions: ``(T, N, 3)`` cloth vertices per output frame.
+        seconds_per_frame: ``(T,)`` wall time of each frame.
+        max_stretch, mean_stretch: ``(T,)`` edge strain ``|l / L - 1|``.
+        penetration: ``(T,)`` fraction of free vertices inside the body (NaN without body).
+        settings: the solver settings.
+    """
+
+    positions: Tensor
+    seconds_per_frame: np.ndarray
+    max_stretch: np.ndarray
+    mean_stretch: np.ndarray
+    penetration: np.ndarray
+    settings: dict = field(default_factory=dict)
+
+
+def edge_strain(x: Tensor, stretch: DistanceConstraints) -> Tensor:
+    r"""Edge strain :math:`|l / L - 1|` of positions ``x`` ``(N, 3)`` against the rest
+    lengths :math:`L` of the stretch constraints."""
+    pairs = stretch.pairs
+    length = (x[pairs[:, 0]] - x[pairs[:, 1]]).norm(dim=-1)
+    return (length / stretch.rest_lengths.clamp_min(1e-12) - 1.0).abs()
+
+
+class FrameRecorder:
+    """Collects positions, wall time, strain and penetration of each output frame.
+
+    Args:
+        frames, vertices: size of the sequence.
+        stretch: the mesh edges with their rest lengths (for the strain).
+        free: ``(N,)`` bool, the vertices physics moves (penetration counts only these).
+        collider: the body, or ``None`` (penetration is then NaN).
+        dtype: precision the positions are stored in.
+    """
+
+    def __init__(self, frames: int, vertices: int, stretch: DistanceConstraints, free: Tensor,
+                 collider: BodyCollider | None, dtype: torch.dtype = torch.float32):
+        self.stretch, self.free, self.collider = stretch, free, collider
+        self.positions = torch.empty(frames, vertices, 3, dtype=dtype)
+        self.seconds = np.zeros(frames)
+        self.max_stretch, self.mean_stretch = np.zeros(frames), np.zeros(frames)
+        self.penetration = np.full(frames, np.nan)
+
+    def record(self, frame: int, x: Tensor, seconds: float) -> None:
+        """Stores frame ``frame``; raises ``FloatingPointError`` if ``x`` is not finite."""
+        if not torch.isfinite(x).all():
+            raise FloatingPointError(f"cloth state became non-finite at frame {frame}")
+        self.positions[frame] = x.detach().cpu()
+        self.seconds[frame] = seconds
+        strain = edge_strain(x, self.stretch)
+        self.max_stretch[frame], self.mean_stretch[frame] = strain.max().item(), strain.mean().item()
+        if self.collider is not None:
+            inside = self.collider.signed_distance(frame, x[self.free]) < 0
+            self.penetration[frame] = inside.float().mean().item()
+
+    def result(self, settings: dict) -> SimulationResult:
+        return SimulationResult(self.positions, self.seconds, self.max_stretch, self.mean_stretch,
+                                self.penetration, settings)
