@@ -14,6 +14,7 @@ for seconds, a 10 000-frame stream.
 
 from __future__ import annotations
 
+import importlib.util
 import math
 import time
 from dataclasses import asdict, dataclass
@@ -68,6 +69,12 @@ class Case:
     measure: str
     run: Callable[["_Context"], tuple[float, list]]
     raises: str | None = None
+    needs: str | None = None  # an optional package the case runs only with
+
+
+def available_cases() -> list[Case]:
+    """The cases whose optional packages are installed."""
+    return [c for c in CASES if c.needs is None or importlib.util.find_spec(c.needs) is not None]
 
 
 class _Context:
@@ -276,11 +283,16 @@ def _descriptor_degenerate(context):
 
 def _simulate(context, motion: str = "sway", speed: float = 1.0, **settings):
     from swingar_pyg.sim import XPBDSettings
-    from swingar_pyg.world.sequence import simulate_sequence
 
     options = dict(substeps=context.sizes.substeps, iterations=2, settle_frames=5)
     options.update(settings)
     solver = XPBDSettings(**options)
+    return _simulated(context, motion, speed, solver)
+
+
+def _simulated(context, motion: str, speed: float, solver) -> tuple:
+    from swingar_pyg.world.sequence import simulate_sequence
+
     clip = context.motion(motion, context.sizes.sim_seconds, speed=speed, fps=solver.fps)
     result = simulate_sequence(context.body, context.shape, context.skirt, clip, solver).result
     note = (f"max stretch {100 * result.max_stretch.max():.1f} %, inside the body "
@@ -295,6 +307,18 @@ def _simulator(motion: str = "sway", speed: float = 1.0, **settings):
 def _simulator_coarse(context):
     substeps = max(1, context.sizes.substeps // 4)
     return _simulate(context, substeps=substeps)
+
+
+def _vbd(motion: str = "sway", speed: float = 1.0, substeps: int | None = None, **settings):
+    """A VBD case: 10 x 10 at full size, 5 x 5 at small size, unless told."""
+    def run(context):
+        from swingar_pyg.sim import VBDSettings
+
+        steps = max(5, context.sizes.substeps // 5)
+        solver = VBDSettings(substeps=substeps or steps, iterations=steps, settle_frames=5,
+                             **settings)
+        return _simulated(context, motion, speed, solver)
+    return run
 
 
 # ------------------------------------------------------------------------- estimator
@@ -432,6 +456,12 @@ def _raise_simulator_settings(context):
     XPBDSettings(stretch_compliance=-1.0)
 
 
+def _raise_vbd_settings(context):
+    from swingar_pyg.sim import VBDSettings
+
+    VBDSettings(bend_stiffness=-1.0)
+
+
 def _raise_body_shape(context):
     context.body.rest_vertices(torch.full((6,), 1.5))
 
@@ -493,6 +523,17 @@ CASES: tuple[Case, ...] = (
     Case("simulator", "arms crossed", "max edge strain", _simulator("arm_cross")),
     Case("simulator", "fast spin (3 turns/s)", "max edge strain",
          _simulator("spin_stop", speed=3.0)),
+    Case("VBD simulator", "membrane 100x stiffer", "max edge strain",
+         _vbd(stretch_stiffness=1e6), needs="newton"),
+    Case("VBD simulator", "bending 1e4x stiffer", "max edge strain", _vbd(bend_stiffness=10.0),
+         needs="newton"),
+    Case("VBD simulator", "100x heavier cloth", "max edge strain", _vbd(density=15.0),
+         needs="newton"),
+    Case("VBD simulator", "one substep per frame (33 ms)", "max edge strain", _vbd(substeps=1),
+         needs="newton"),
+    Case("VBD simulator", "legs split", "max edge strain", _vbd("leg_split"), needs="newton"),
+    Case("VBD simulator", "fast spin (3 turns/s)", "max edge strain", _vbd("spin_stop", speed=3.0),
+         needs="newton"),
     Case("estimator", "long stream (drift)", "max mm between equal phases", _estimator_drift),
     Case("estimator", "bfloat16 autocast", "max mm vs float32", _estimator_bf16),
     Case("estimator", "legs split", "mean mm from rigid skinning", _estimator_extreme("leg_split")),
@@ -508,6 +549,8 @@ CASES: tuple[Case, ...] = (
     Case("mesh", "NaN vertex", "", _raise_mesh_nan, raises="not finite"),
     Case("simulator", "negative compliance", "", _raise_simulator_settings,
          raises="must be finite and >= 0"),
+    Case("VBD simulator", "negative bending stiffness", "", _raise_vbd_settings,
+         raises="must be finite and >= 0", needs="newton"),
     Case("body", "shape outside [0, 1]", "", _raise_body_shape, raises="must lie in [0, 1]"),
     Case("body SDF", "NaN points", "", _raise_body_sdf_nan, raises="points must be finite"),
     Case("collisions", "NaN garment", "", _raise_collision_nan, raises="not finite"),
@@ -567,7 +610,7 @@ def run_stability(sizes: StabilitySizes = FULL, estimator=None, body_sdf: str | 
             exact SDF).
     """
     context = _Context(sizes, estimator, body_sdf)
-    cases = [c for c in CASES if components is None or c.component in components]
+    cases = [c for c in available_cases() if components is None or c.component in components]
     if progress:
         from tqdm import tqdm
 
