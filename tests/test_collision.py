@@ -40,6 +40,25 @@ def test_exact_reference_sign_and_normal_on_a_sphere_mesh():
     assert (np.einsum('ij,ij->i', n, directions.numpy()) > 0.99).all()
 
 
+def test_inside_share_counts_points_inside_a_moving_sphere_mesh():
+    trimesh = pytest.importorskip('trimesh')
+    from swingar_pyg.collision.reference import inside_share
+
+    ball = trimesh.creation.icosphere(subdivisions=4, radius=RADIUS)
+    generator = np.random.default_rng(0)
+    frames, count = 3, 400
+    shift = np.array([[0.0, 0.0, 0.0], [0.5, 0.0, 0.0], [0.0, -2.0, 1.0]])
+    directions = generator.normal(size=(frames, count, 3))
+    directions /= np.linalg.norm(directions, axis=-1, keepdims=True)
+    radii = generator.uniform(0.0, 2 * RADIUS, size=(frames, count, 1))
+    radii[np.abs(radii - RADIUS) < 0.01] += 0.02  # keep off the faceted surface
+    points = directions * radii + shift[:, None]
+    share = inside_share(ball.vertices[None] + shift[:, None], ball.faces, points)
+    assert np.allclose(share, (radii[..., 0] < RADIUS).mean(axis=1))
+    with pytest.raises(ValueError, match='not closed'):
+        inside_share(ball.vertices[None], ball.faces[1:], points[:1])
+
+
 def test_exact_reference_on_the_body_in_the_armpit_and_crotch():
     pytest.importorskip('anny')
     from swingar_pyg.geometry import vertex_normals

@@ -69,6 +69,9 @@ def test_generation_resumes_and_merges(tmp_path):
         assert len(file['garments']) == 2
         reference = file['sequences/train-00001/garment_vertices'][:]
         assert np.isfinite(reference).all()
+        exact = file['sequences/train-00001/penetration_exact'][:]
+        assert exact.shape == (len(reference),) and ((exact >= 0) & (exact <= 1)).all()
+    assert 0 <= first['simulation']['max_penetration_exact'] <= 1
     # A killed run leaves some parts; only the missing ones are simulated again.
     (output / 'parts' / 'train' / 'train-00001.h5').unlink()
     (output / 'train.h5').unlink()

@@ -7,7 +7,8 @@ Layout::
     /sequences/<id>/  garment_vertices (T,N,3) [chunked by frame, gzip]
                       rigid_vertices (T,N,3) rotations (T,J,3,3) translation (T,3)
                       body_shape (S,) seconds_per_frame max_stretch mean_stretch
-                      penetration (T,)
+                      penetration (T,) [simulator's own nearest-vertex test]
+                      penetration_exact (T,) [ray parity; absent when not measured]
                       attrs: garment, motion, fps, joint_names, settings (JSON),
                              simulator_revision (absent in files older than it)
 
@@ -63,6 +64,8 @@ def write_sequences(path: str | Path, sequences: list[SimulatedSequence],
                 group["body_shape"] = sequence.body_shape.numpy()
                 for name in ("seconds_per_frame", "max_stretch", "mean_stretch", "penetration"):
                     group[name] = getattr(result, name)
+                if sequence.penetration_exact is not None:
+                    group["penetration_exact"] = sequence.penetration_exact
                 group.attrs["garment"] = garment.name
                 group.attrs["motion"] = sequence.motion.name
                 group.attrs["fps"] = sequence.motion.fps
