@@ -66,7 +66,8 @@ class FrameRecorder:
         self.positions[frame] = x.detach().cpu()
         self.seconds[frame] = seconds
         strain = edge_strain(x, self.stretch)
-        self.max_stretch[frame], self.mean_stretch[frame] = strain.max().item(), strain.mean().item()
+        self.max_stretch[frame] = strain.max().item()
+        self.mean_stretch[frame] = strain.mean().item()
         if self.collider is not None:
             inside = self.collider.signed_distance(frame, x[self.free]) < 0
             self.penetration[frame] = inside.float().mean().item()

@@ -46,7 +46,9 @@ class VBDSettings:
         iterations: block-descent sweeps per substep.
         stretch_stiffness: StVK Lamé coefficients ``tri_ke = tri_ka`` (N/m).
         bend_stiffness: dihedral bending stiffness ``edge_ke``.
-        damping: Rayleigh damping of membrane and bending (``tri_kd = edge_kd``).
+        damping: velocity decay rate, 1/s (air drag, as the XPBD solver's ``damping``:
+            velocities are scaled by ``exp(-damping * dt)`` after each substep).
+        material_damping: Rayleigh damping of membrane and bending (``tri_kd = edge_kd``).
         density: cloth mass per area, kg/m².
         contact_stiffness, contact_damping: penalty of the body contact.
         friction: Coulomb coefficient against the body.
@@ -60,7 +62,8 @@ class VBDSettings:
     iterations: int = 10
     stretch_stiffness: float = 1e4
     bend_stiffness: float = 1e-3
-    damping: float = 1e-4
+    damping: float = 1.0
+    material_damping: float = 1e-4
     density: float = 0.15
     contact_stiffness: float = 1e4
     contact_damping: float = 1e-2
@@ -73,8 +76,9 @@ class VBDSettings:
         if self.fps <= 0 or self.substeps < 1 or self.iterations < 1:
             raise ValueError(f"fps, substeps and iterations must be positive, got {self.fps}, "
                              f"{self.substeps}, {self.iterations}")
-        for name in ("stretch_stiffness", "bend_stiffness", "damping", "density",
-                     "contact_stiffness", "contact_damping", "thickness", "settle_frames"):
+        for name in ("stretch_stiffness", "bend_stiffness", "damping", "material_damping",
+                     "density", "contact_stiffness", "contact_damping", "thickness",
+                     "settle_frames"):
             value = getattr(self, name)
             if not np.isfinite(value) or value < 0:
                 raise ValueError(f"{name} must be finite and >= 0, got {value}")
@@ -127,8 +131,8 @@ class VBDCloth:
             pos=wp.vec3(0.0, 0.0, 0.0), rot=wp.quat_identity(), scale=1.0,
             vel=wp.vec3(0.0, 0.0, 0.0), vertices=initial.double().cpu().numpy(),
             indices=self.mesh.faces.reshape(-1).tolist(), density=s.density,
-            tri_ke=s.stretch_stiffness, tri_ka=s.stretch_stiffness, tri_kd=s.damping,
-            edge_ke=s.bend_stiffness, edge_kd=s.damping, particle_radius=s.thickness)
+            tri_ke=s.stretch_stiffness, tri_ka=s.stretch_stiffness, tri_kd=s.material_damping,
+            edge_ke=s.bend_stiffness, edge_kd=s.material_damping, particle_radius=s.thickness)
         # Lumped masses as in the XPBD solver, so both move the same cloth.
         masses = vertex_masses(self.mesh, s.density).double().numpy()
         masses[self.pinned.cpu().numpy()] = 0.0
@@ -190,6 +194,7 @@ class VBDCloth:
         control = model.control()
         targets = pin_targets.to(self.device, torch.float32)
         dt = 1.0 / (s.fps * s.substeps)
+        decay = float(np.exp(-s.damping * dt))
         recorder = FrameRecorder(frames, n, self.stretch, self.free, collider)
 
         schedule = [0] * s.settle_frames + list(range(frames))
@@ -214,6 +219,7 @@ class VBDCloth:
                 pipeline.collide(state, contacts)
                 solver.step(state, next_state, control, contacts, dt)
                 state, next_state = next_state, state
+                wp.to_torch(state.particle_qd).mul_(decay)
             x = wp.to_torch(state.particle_q)
             if settling:
                 if not torch.isfinite(x).all():
