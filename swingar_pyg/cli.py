@@ -25,7 +25,7 @@ def _simulate(args: argparse.Namespace) -> int:
     import numpy as np
     import torch
 
-    from swingar_pyg.sim import XPBDSettings
+    from swingar_pyg.sim import VBDSettings, XPBDSettings
     from swingar_pyg.viz.preview import render_sequence
     from swingar_pyg.world.body import AnnyBody
     from swingar_pyg.world.garment import SkirtSpec, fit_procedural_skirt
@@ -46,7 +46,10 @@ def _simulate(args: argparse.Namespace) -> int:
         garment = fit_procedural_skirt(spec, body, shape)
     motion = make_motion(args.motion, body, shape, seconds=args.seconds, fps=args.fps,
                          speed=args.speed, amplitude=args.amplitude, mirror=args.mirror)
-    settings = XPBDSettings(fps=args.fps, substeps=args.substeps, iterations=args.iterations)
+    solver = {"xpbd": XPBDSettings, "vbd": VBDSettings}[args.solver]
+    steps = {name: value for name, value in (("substeps", args.substeps),
+                                               ("iterations", args.iterations)) if value}
+    settings = solver(fps=args.fps, **steps)
     sequence = simulate_sequence(body, shape, garment, motion, settings, progress=True)
     out = Path(args.out)
     path = write_sequences(out / "sequence.h5", [sequence])
@@ -154,8 +157,13 @@ def build_parser() -> argparse.ArgumentParser:
                           help="> 0 for an irregular triangulation")
     simulate.add_argument("--body-shape", type=float, nargs=6, metavar="P",
                           help="anny gender age muscle weight height proportions, in [0, 1]")
-    simulate.add_argument("--substeps", type=int, default=50)
-    simulate.add_argument("--iterations", type=int, default=2)
+    simulate.add_argument("--solver", choices=("xpbd", "vbd"), default="xpbd",
+                          help="xpbd (the datasets') or vbd (newton's, pip install "
+                               "'swingar-pyg[newton]')")
+    simulate.add_argument("--substeps", type=int, default=None,
+                          help="per frame (default: the solver's, XPBD 50, VBD 10)")
+    simulate.add_argument("--iterations", type=int, default=None,
+                          help="per substep (default: the solver's, XPBD 2, VBD 10)")
     simulate.add_argument("--out", default="runs/simulate", help="output folder")
     simulate.add_argument("--no-preview", dest="preview", action="store_false")
     simulate.set_defaults(run=_simulate)

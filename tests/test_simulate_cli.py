@@ -25,6 +25,22 @@ def test_simulate_writes_a_sequence_file_and_a_preview(tmp_path, capsys):
     assert sorted(p.name for p in out.iterdir()) == ['preview.gif', 'sequence.h5']
 
 
+def test_simulate_with_the_vbd_solver_stores_its_settings(tmp_path, capsys):
+    pytest.importorskip('anny')
+    pytest.importorskip('newton')
+    import json
+
+    out = tmp_path / 'run'
+    assert main(['simulate', '--solver', 'vbd', '--motion', 'sway', '--seconds', '0.2',
+                 '--vertices', '150', '--substeps', '4', '--no-preview', '--out', str(out)]) == 0
+    with h5py.File(out / 'sequence.h5') as file:
+        sequence = file['sequences/000000']
+        settings = json.loads(sequence.attrs['settings'])
+        assert settings['substeps'] == 4 and settings['iterations'] == 10  # VBD's default
+        assert 'material_damping' in settings
+        assert np.isfinite(sequence['garment_vertices'][:]).all()
+
+
 def test_simulate_rejects_an_unknown_motion(tmp_path, capsys):
     pytest.importorskip('anny')
     with pytest.raises(SystemExit):
