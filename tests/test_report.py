@@ -107,6 +107,10 @@ def test_equal_error_speedup_interpolates_the_simulator_curve():
     assert result['speedup'] == pytest.approx(20.0, rel=1e-6)
     outside = equal_error_speedup(point('estimator', 1.0, 5.0), curve)
     assert outside['speedup'] is None and 'outside' in outside['note']
+    # a slower and less accurate setting is off the Pareto front and ignored
+    dominated = curve + [point('finer but drifting', 12.0, 5000.0)]
+    again = equal_error_speedup(point('estimator', float(np.sqrt(160.0)), 5.0), dominated)
+    assert again['simulator_ms_at_equal_error'] == pytest.approx(100.0, rel=1e-6)
 
 
 def test_report_configs_parse_and_bad_ones_are_refused(tmp_path):
