@@ -1,4 +1,5 @@
 import csv
+import importlib.util
 
 import numpy as np
 import pytest
@@ -35,7 +36,7 @@ models:
     collisions: [none, exact, neural]
 precisions: [fp32, bf16]
 train_missing: true
-simulator: {{settings: [[5, 2], [10, 2]], sequences: 1}}
+simulator: {{settings: [[5, 2], [10, 2]], sequences: 1{second}}}
 streaming: {{vertices: [150], frames: 4}}
 stability: "off"
 """
@@ -59,8 +60,10 @@ def test_report_measures_every_method_on_the_same_sequences(tiny_windows, tiny_b
     sdf_stack = tmp_path / 'sdf_stack.yaml'
     sdf_stack.write_text(sdf_config_of(tiny_body_sdf).read_text())
     report_yaml = tmp_path / 'report.yaml'
+    has_newton = importlib.util.find_spec('newton') is not None
     report_yaml.write_text(TINY_REPORT.format(root=tmp_path, dataset=tiny_windows.hparams.config,
-                                              body_sdf=sdf_stack))
+                                              body_sdf=sdf_stack,
+                                              second=', second: [2, 2]' if has_newton else ''))
     config = ReportConfig.from_yaml(report_yaml)
     report = run_report(config, progress=False, log=lambda *_: None)
     text = report.read_text()
@@ -74,7 +77,8 @@ def test_report_measures_every_method_on_the_same_sequences(tiny_windows, tiny_b
     methods = [row['method'] for row in rows]
     assert methods == ['tiny estimator', 'tiny estimator bf16',
                        'tiny estimator + exact collisions', 'tiny estimator + neural collisions',
-                       'rigid skinning', 'simulator 5x2', 'simulator 10x2']
+                       'rigid skinning', 'simulator 5x2', 'simulator 10x2'] + (
+                           ['VBD simulator 2x2 (newton)'] if has_newton else [])
     by_method = {row['method']: row for row in rows}
     # the exact pass leaves nothing inside (the network only tries to)
     assert float(by_method['tiny estimator + exact collisions']['inside_percent']) == 0.0
@@ -88,6 +92,10 @@ def test_report_measures_every_method_on_the_same_sequences(tiny_windows, tiny_b
     assert by_method['simulator 10x2']['is_ground_truth_setting'] == 'True'
     assert float(by_method['simulator 10x2']['mean_mm']) < 0.1 * float(
         by_method['simulator 5x2']['mean_mm'])
+    if has_newton:  # another cloth model: neither the data nor far from it
+        second = float(by_method['VBD simulator 2x2 (newton)']['mean_mm'])
+        assert float(by_method['simulator 10x2']['mean_mm']) < second < 1e3
+        assert 'Second simulator: VBD simulator 2x2 (newton), on the same scenes' in text
     # a finished run is reused: a second report trains nothing
     stamp = (tmp_path / 'estimator' / 'checkpoints' / 'last.ckpt').stat().st_mtime_ns
     run_report(config, progress=False, log=lambda *_: None)

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 import torch
@@ -171,26 +172,53 @@ def evaluate_estimator(name: str, estimator, sequences: list[TestSequence],
     return MethodResult(name, "estimator", errors, seconds, extra)
 
 
-def evaluate_simulator(sequences: list[TestSequence], substeps: int, iterations: int,
-                       body) -> MethodResult:
-    """The simulator re-run on each sequence with other substeps and iterations
-    (all else as stored), against the stored ground truth."""
-    from swingar_pyg.sim import XPBDSettings
+def _resimulate(sequences: list[TestSequence], settings_for: Callable[[dict], object],
+                body) -> tuple[dict, list, float]:
+    """Each sequence simulated again with ``settings_for(stored settings)``: errors
+    against its stored ground truth, seconds per frame, largest strain."""
     from swingar_pyg.world.sequence import simulate_sequence
 
     errors, seconds, strain = {}, [], 0.0
     for s in sequences:
         stored = {**s.settings, "gravity": tuple(s.settings["gravity"])}
-        settings = XPBDSettings(**{**stored, "substeps": substeps, "iterations": iterations})
-        result = simulate_sequence(body, s.body_shape, s.garment, s.motion, settings).result
+        result = simulate_sequence(body, s.body_shape, s.garment, s.motion,
+                                   settings_for(stored)).result
         errors[s.id] = _distance_mm(result.positions, s.truth)
         seconds.extend(result.seconds_per_frame.tolist())
         strain = max(strain, float(result.max_stretch.max()))
+    return errors, seconds, strain
+
+
+def evaluate_simulator(sequences: list[TestSequence], substeps: int, iterations: int,
+                       body) -> MethodResult:
+    """The simulator re-run on each sequence with other substeps and iterations
+    (all else as stored), against the stored ground truth."""
+    from swingar_pyg.sim import XPBDSettings
+
+    errors, seconds, strain = _resimulate(
+        sequences, lambda stored: XPBDSettings(**{**stored, "substeps": substeps,
+                                                  "iterations": iterations}), body)
     reference = sequences[0].settings
     same = (substeps, iterations) == (reference["substeps"], reference["iterations"])
     return MethodResult(f"simulator {substeps}x{iterations}", "simulator", errors, seconds,
                         {"substeps": substeps, "iterations": iterations, "max_strain": strain,
                          "is_ground_truth_setting": same})
+
+
+def evaluate_second_simulator(sequences: list[TestSequence], substeps: int, iterations: int,
+                              body) -> MethodResult:
+    """newton's VBD solver on the same scenes (frame rate, gravity, density, damping,
+    friction, thickness and settling as stored): its distance from the XPBD ground
+    truth is the floor two credible simulators set (see ``swingar_pyg.sim.vbd``)."""
+    from swingar_pyg.sim import VBDSettings
+
+    shared = ("fps", "gravity", "density", "damping", "friction", "thickness", "settle_frames")
+    errors, seconds, strain = _resimulate(
+        sequences, lambda stored: VBDSettings(substeps=substeps, iterations=iterations,
+                                              **{k: stored[k] for k in shared}), body)
+    return MethodResult(f"VBD simulator {substeps}x{iterations} (newton)",
+                        "second simulator", errors, seconds,
+                        {"substeps": substeps, "iterations": iterations, "max_strain": strain})
 
 
 def equal_error_speedup(estimator: MethodResult, simulator: list[MethodResult]) -> dict:

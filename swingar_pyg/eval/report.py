@@ -45,6 +45,7 @@ class ReportConfig:
     train_missing: bool = True
     simulator_settings: tuple[tuple[int, int], ...] = ((5, 2), (10, 2), (20, 2), (50, 2))
     simulator_sequences: int = 4
+    second_simulator: tuple[int, int] | None = None
     streaming_vertices: tuple[int, ...] = (1000, 5000, 20000)
     streaming_frames: int = 60
     stability: str = "full"
@@ -71,6 +72,8 @@ class ReportConfig:
                 simulator_settings=tuple(tuple(s) for s in simulator.get(
                     "settings", cls.simulator_settings)),
                 simulator_sequences=int(simulator.get("sequences", cls.simulator_sequences)),
+                second_simulator=(tuple(simulator["second"]) if simulator.get("second")
+                                  else None),
                 streaming_vertices=tuple(streaming.get("vertices", cls.streaming_vertices)),
                 streaming_frames=int(streaming.get("frames", cls.streaming_frames)),
                 stability=str(raw.get("stability", "full")),
@@ -217,6 +220,7 @@ def run_report(config: ReportConfig, progress: bool = True, log=print) -> Path:
         equal_error_speedup,
         evaluate_estimator,
         evaluate_rigid,
+        evaluate_second_simulator,
         evaluate_simulator,
         load_test_sequences,
     )
@@ -267,6 +271,10 @@ def run_report(config: ReportConfig, progress: bool = True, log=print) -> Path:
     simulator = [evaluate_simulator(chosen, s, i, body) for s, i in config.simulator_settings]
     speedups = {r.name: equal_error_speedup(_restricted(r, chosen), simulator)
                 for r in results}
+    second = None
+    if config.second_simulator:
+        log("second simulator")
+        second = evaluate_second_simulator(chosen, *config.second_simulator, body)
     streaming = (_streaming_fps(first_estimator, body, config.streaming_vertices,
                                 config.streaming_frames) if first_estimator else [])
     extra = {}
@@ -289,7 +297,8 @@ def run_report(config: ReportConfig, progress: bool = True, log=print) -> Path:
 
     return write_report(out, config, machine=_machine(), test_path=test_path,
                         sequences=sequences, results=results, per_model=per_model,
-                        rigid=rigid, simulator=simulator, simulated=chosen, speedups=speedups,
+                        rigid=rigid, simulator=simulator, second=second, simulated=chosen,
+                        speedups=speedups,
                         streaming=streaming, extra=extra, stability=stability,
                         checkpoints=checkpoints, body_sdf=body_sdf,
                         seconds=time.perf_counter() - started)

@@ -62,7 +62,7 @@ def _motion(s) -> str:
     return s.motion.name
 
 
-def plot_error_vs_time(results, rigid, simulator, floor, simulated):
+def plot_error_vs_time(results, rigid, simulator, second, floor, simulated):
     """Every method on the sequences the simulator re-ran, so the points compare."""
     figure, axis = _figure((8.5, 5))
     curve = sorted((r.ms_per_frame, r.stats(simulated)["mean_mm"], r) for r in simulator)
@@ -74,6 +74,9 @@ def plot_error_vs_time(results, rigid, simulator, floor, simulated):
                       textcoords="offset points")
     axis.scatter([rigid.ms_per_frame], [rigid.stats(simulated)["mean_mm"]], marker="s",
                  color="black", label="rigid skinning", zorder=3)
+    if second is not None:
+        axis.scatter([second.ms_per_frame], [second.stats(simulated)["mean_mm"]], marker="D",
+                     color="dimgrey", label=second.name, zorder=3)
     for k, result in enumerate(results):
         axis.scatter([result.ms_per_frame], [result.stats(simulated)["mean_mm"]], s=50, zorder=3,
                      color=f"C{k}", label=result.name)
@@ -151,7 +154,7 @@ def _fmt(stats: dict) -> str:
 
 
 def write_report(out: Path, config, *, machine, test_path, sequences, results, per_model,
-                 rigid, simulator, simulated, speedups, streaming, extra, stability,
+                 rigid, simulator, second, simulated, speedups, streaming, extra, stability,
                  checkpoints, body_sdf, seconds) -> Path:
     out.mkdir(parents=True, exist_ok=True)
     from swingar_pyg.eval.stability import as_dicts, stability_table
@@ -161,6 +164,8 @@ def write_report(out: Path, config, *, machine, test_path, sequences, results, p
     if not finest.extra["is_ground_truth_setting"]:
         floor = {"name": f"{finest.name} vs the ground truth's setting", **finest.stats()}
     rows = [r.row() for r in results] + [rigid.row()] + [r.row() for r in simulator]
+    if second is not None:
+        rows.append(second.row())
     _write_csv(out / "error_vs_time.csv", rows)
     garment_rows = []
     for label, runs in list(per_model.items()) + [("rigid skinning", [rigid])]:
@@ -175,7 +180,7 @@ def write_report(out: Path, config, *, machine, test_path, sequences, results, p
     _write_csv(out / "per_motion.csv", [r for r in garment_rows if "motion" in r])
     _write_csv(out / "streaming.csv", streaming)
     _write_csv(out / "stability.csv", as_dicts(stability))
-    _save(plot_error_vs_time(results, rigid, simulator, floor, simulated),
+    _save(plot_error_vs_time(results, rigid, simulator, second, floor, simulated),
           out / "error_vs_time.png")
     _save(plot_per_garment(per_model, rigid, sequences), out / "per_garment.png")
     _save(plot_distributions(results, rigid), out / "distributions.png")
@@ -223,6 +228,9 @@ def write_report(out: Path, config, *, machine, test_path, sequences, results, p
         lines.append(f"| {result.name}{tag} | {_fmt(result.stats())} | "
                      f"{result.ms_per_frame:.0f} | | largest strain "
                      f"{100 * result.extra['max_strain']:.0f} % |")
+    if second is not None:
+        lines.append(f"| {second.name} | {_fmt(second.stats())} | {second.ms_per_frame:.0f} | "
+                     f"| largest strain {100 * second.extra['max_strain']:.0f} % |")
     lines += [
         "",
         f"The simulator rows re-ran {len(simulated)} sequences "
@@ -238,9 +246,17 @@ def write_report(out: Path, config, *, machine, test_path, sequences, results, p
         lines.append(f"Noise floor: the finest setting, {finest.name}, differs from the ground "
                      f"truth by {floor['mean_mm']:.1f} mm on average (p95 "
                      f"{floor['p95_mm']:.1f} mm): no method's error is meaningful below that. "
-                     "A second simulator (newton's VBD) disagrees with this one by more on "
-                     "flared garments; that floor is measured by "
-                     "`benchmarks/bench_sim_crosscheck.py`, not in this run.")
+                     + ("" if second is not None else
+                        "A second simulator's disagreement, the other floor, is not measured "
+                        "in this run (config `simulator.second`; or "
+                        "`benchmarks/bench_sim_crosscheck.py`)."))
+    if second is not None:
+        stats = second.stats()
+        lines.append(f"Second simulator: {second.name}, on the same scenes with the same "
+                     f"frame rate, gravity, density, damping, friction and thickness, differs "
+                     f"from the ground truth by {stats['mean_mm']:.1f} mm on average (p95 "
+                     f"{stats['p95_mm']:.1f} mm): the floor two credible cloth models set "
+                     f"(largest strain {100 * second.extra['max_strain']:.0f} %).")
     lines += ["", "## Per garment and per motion", "", "![per garment](per_garment.png)", "",
               "| method | " + " | ".join(garments) + " |", "|---|" + "---|" * len(garments)]
     for label, runs in list(per_model.items()) + [("rigid skinning", [rigid])]:
