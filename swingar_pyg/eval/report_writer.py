@@ -81,7 +81,7 @@ def plot_error_vs_time(results, rigid, simulator, second, floor, simulated):
         axis.scatter([result.ms_per_frame], [result.stats(simulated)["mean_mm"]], s=50, zorder=3,
                      color=f"C{k}", label=result.name)
     if floor is not None:
-        axis.axhline(floor["mean_mm"], color="C2", lw=1, ls="--",
+        axis.axhline(floor["mean_mm"], color="black", lw=1, ls=":",
                      label=f"noise floor: {floor['name']}")
     axis.set(xscale="log", yscale="log", xlabel="ms per frame (this machine, one thread)",
              ylabel="mean vertex error vs ground truth (mm)",
