@@ -1,4 +1,5 @@
-"""What every simulator records per output frame, whatever solved it."""
+"""What every simulator checks of its inputs and records per output frame, whatever
+solved it."""
 
 from __future__ import annotations
 
@@ -30,6 +31,23 @@ class SimulationResult:
     mean_stretch: np.ndarray
     penetration: np.ndarray
     settings: dict = field(default_factory=dict)
+
+
+def check_inputs(initial: Tensor, pin_targets: Tensor, vertices: int, pins: int,
+                 collider: BodyCollider | None) -> None:
+    """Raises ``ValueError`` unless ``initial`` is ``(vertices, 3)``, ``pin_targets``
+    ``(T, pins, 3)``, the body (if any) has ``T`` frames, and both are finite."""
+    frames = pin_targets.shape[0]
+    if initial.shape != (vertices, 3):
+        raise ValueError(f"initial positions must have shape ({vertices}, 3), got "
+                         f"{tuple(initial.shape)}")
+    if pin_targets.shape[1:] != (pins, 3):
+        raise ValueError(f"pin_targets must have shape (T, {pins}, 3), got "
+                         f"{tuple(pin_targets.shape)}")
+    if collider is not None and collider.num_frames != frames:
+        raise ValueError(f"the body has {collider.num_frames} frames, the pins {frames}")
+    if not (torch.isfinite(initial).all() and torch.isfinite(pin_targets).all()):
+        raise ValueError("initial positions and pin targets must be finite")
 
 
 def edge_strain(x: Tensor, stretch: DistanceConstraints) -> Tensor:

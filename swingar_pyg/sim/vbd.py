@@ -32,7 +32,7 @@ from torch import Tensor
 from swingar_pyg.geometry.mesh import Mesh
 from swingar_pyg.sim.collider import BodyCollider
 from swingar_pyg.sim.constraints import distance_constraints, stretch_pairs
-from swingar_pyg.sim.recording import FrameRecorder, SimulationResult
+from swingar_pyg.sim.recording import FrameRecorder, SimulationResult, check_inputs
 from swingar_pyg.sim.xpbd import vertex_masses
 
 
@@ -162,16 +162,7 @@ class VBDCloth:
         """
         s = self.settings
         frames, n = pin_targets.shape[0], self.mesh.num_vertices
-        if initial.shape != (n, 3):
-            raise ValueError(f"initial positions must have shape ({n}, 3), got "
-                             f"{tuple(initial.shape)}")
-        if pin_targets.shape[1:] != (len(self.pinned), 3):
-            raise ValueError(f"pin_targets must have shape (T, {len(self.pinned)}, 3), got "
-                             f"{tuple(pin_targets.shape)}")
-        if collider is not None and collider.num_frames != frames:
-            raise ValueError(f"the body has {collider.num_frames} frames, the pins {frames}")
-        if not (torch.isfinite(initial).all() and torch.isfinite(pin_targets).all()):
-            raise ValueError("initial positions and pin targets must be finite")
+        check_inputs(initial, pin_targets, n, len(self.pinned), collider)
 
         body = None if collider is None else collider.vertices.to(self.device, torch.float32)
         newton, wp, model, body_mesh = self._build(

@@ -28,12 +28,17 @@ from torch import Tensor
 
 from swingar_pyg.geometry.mesh import Mesh
 from swingar_pyg.sim.collider import BodyCollider
-from swingar_pyg.sim.recording import FrameRecorder, SimulationResult, edge_strain
 from swingar_pyg.sim.constraints import (
     DistanceConstraints,
     bending_pairs,
     distance_constraints,
     stretch_pairs,
+)
+from swingar_pyg.sim.recording import (
+    FrameRecorder,
+    SimulationResult,
+    check_inputs,
+    edge_strain,
 )
 
 # Raise whenever a change alters simulated positions: dataset files record it, and the
@@ -182,16 +187,7 @@ class XPBDCloth:
         s = self.settings
         frames = pin_targets.shape[0]
         n = self.mesh.num_vertices
-        if initial.shape != (n, 3):
-            raise ValueError(f"initial positions must have shape ({n}, 3), got "
-                             f"{tuple(initial.shape)}")
-        if pin_targets.shape[1:] != (len(self.pinned), 3):
-            raise ValueError(f"pin_targets must have shape (T, {len(self.pinned)}, 3), got "
-                             f"{tuple(pin_targets.shape)}")
-        if collider is not None and collider.num_frames != frames:
-            raise ValueError(f"the body has {collider.num_frames} frames, the pins {frames}")
-        if not (torch.isfinite(initial).all() and torch.isfinite(pin_targets).all()):
-            raise ValueError("initial positions and pin targets must be finite")
+        check_inputs(initial, pin_targets, n, len(self.pinned), collider)
 
         x = initial.to(self.device, self.dtype).clone()
         targets = pin_targets.to(self.device, self.dtype)

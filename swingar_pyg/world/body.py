@@ -33,6 +33,19 @@ class PosedBody:
     joint_positions: Tensor
 
 
+def check_pose(rotations: Tensor, translation: Tensor, joints: int) -> None:
+    """Raises ``ValueError`` unless ``rotations`` is ``(T, joints, 3, 3)`` and
+    ``translation`` ``(T, 3)``, both finite."""
+    if rotations.dim() != 4 or rotations.shape[1:] != (joints, 3, 3):
+        raise ValueError(f"rotations must have shape (T, {joints}, 3, 3), "
+                         f"got {tuple(rotations.shape)}")
+    if translation.shape != (rotations.shape[0], 3):
+        raise ValueError(f"translation must have shape ({rotations.shape[0]}, 3), "
+                         f"got {tuple(translation.shape)}")
+    if not (torch.isfinite(rotations).all() and torch.isfinite(translation).all()):
+        raise ValueError("rotations and translation must be finite")
+
+
 class BodyModel(Protocol):
     """What the rest of the package needs from a body model."""
 
@@ -106,14 +119,7 @@ class AnnyBody:
     def pose(self, shape: Tensor, rotations: Tensor, translation: Tensor) -> PosedBody:
         shape = self._check_shape(shape)
         joints = len(self.joint_names)
-        if rotations.dim() != 4 or rotations.shape[1:] != (joints, 3, 3):
-            raise ValueError(f"rotations must have shape (T, {joints}, 3, 3), "
-                             f"got {tuple(rotations.shape)}")
-        if translation.shape != (rotations.shape[0], 3):
-            raise ValueError(f"translation must have shape ({rotations.shape[0]}, 3), "
-                             f"got {tuple(translation.shape)}")
-        if not (torch.isfinite(rotations).all() and torch.isfinite(translation).all()):
-            raise ValueError("rotations and translation must be finite")
+        check_pose(rotations, translation, joints)
         # anny skins from its own rest mesh, whose root is not at the origin; our
         # rest pose is the identity pose, so skinning transforms are re-based onto it.
         identity = torch.eye(4).repeat(1, joints, 1, 1)

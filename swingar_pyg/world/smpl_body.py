@@ -19,7 +19,7 @@ from pathlib import Path
 import torch
 from torch import Tensor
 
-from swingar_pyg.world.body import PosedBody
+from swingar_pyg.world.body import PosedBody, check_pose
 
 SMPL_JOINTS = ("pelvis", "left_hip", "right_hip", "spine1", "left_knee", "right_knee", "spine2",
                "left_ankle", "right_ankle", "spine3", "left_foot", "right_foot", "neck",
@@ -95,14 +95,7 @@ class SMPLBody:
 
         shape = self._check_shape(shape)
         joints = len(self.joint_names)
-        if rotations.dim() != 4 or rotations.shape[1:] != (joints, 3, 3):
-            raise ValueError(f"rotations must have shape (T, {joints}, 3, 3), "
-                             f"got {tuple(rotations.shape)}")
-        if translation.shape != (rotations.shape[0], 3):
-            raise ValueError(f"translation must have shape ({rotations.shape[0]}, 3), "
-                             f"got {tuple(translation.shape)}")
-        if not (torch.isfinite(rotations).all() and torch.isfinite(translation).all()):
-            raise ValueError("rotations and translation must be finite")
+        check_pose(rotations, translation, joints)
         m = self._model
         frames = rotations.shape[0]
         to_z_up = SMPL_TO_Z_UP
