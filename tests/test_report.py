@@ -1,5 +1,6 @@
 import csv
 import importlib.util
+import json
 
 import numpy as np
 import pytest
@@ -38,6 +39,7 @@ precisions: [fp32, bf16]
 train_missing: true
 simulator: {{settings: [[5, 2], [10, 2]], sequences: 1{second}}}
 streaming: {{vertices: [150], frames: 4}}
+extra_tests: {{"the test split again": {dataset}}}
 stability: "off"
 """
 
@@ -96,6 +98,13 @@ def test_report_measures_every_method_on_the_same_sequences(tiny_windows, tiny_b
         second = float(by_method['VBD simulator 2x2 (newton)']['mean_mm'])
         assert float(by_method['simulator 10x2']['mean_mm']) < second < 1e3
         assert 'Second simulator: VBD simulator 2x2 (newton), on the same scenes' in text
+    # an extra test split is measured on every model: here the same split, the same error
+    again = json.loads((report.parent / 'report.json').read_text())['extra']
+    again = again['the test split again']['estimators']
+    assert [row['method'] for row in again] == ['tiny estimator']
+    assert again[0]['mean_mm'] == pytest.approx(float(by_method['tiny estimator']['mean_mm']),
+                                                rel=1e-4)
+    assert '## the test split again' in text
     # a finished run is reused: a second report trains nothing
     stamp = (tmp_path / 'estimator' / 'checkpoints' / 'last.ckpt').stat().st_mtime_ns
     run_report(config, progress=False, log=lambda *_: None)
@@ -129,6 +138,11 @@ def test_report_configs_parse_and_bad_ones_are_refused(tmp_path):
         assert config.models and config.output.startswith('runs/report/')
     ablations = ReportConfig.from_yaml('configs/report/ablations.yaml')
     assert ablations.stability == 'off' and len(ablations.models) == 7
+    one_seed = ablations.with_seeds((0,))
+    assert [m.seeds for m in one_seed.models] == [(0,)] * 7
+    assert [m.configs for m in one_seed.models] == [m.configs for m in ablations.models]
+    with pytest.raises(ValueError, match='seeds must be non-negative'):
+        ablations.with_seeds(())
     bad = tmp_path / 'bad.yaml'
     bad.write_text('name: x\noutput: y\ndataset: z\nmodels: [{name: m, configs: [c], '
                    'collisions: [neural]}]\n')

@@ -16,7 +16,7 @@ from __future__ import annotations
 import glob
 import platform
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from importlib import metadata
 from pathlib import Path
 
@@ -51,6 +51,7 @@ class ReportConfig:
     stability: str = "full"
     extra_tests: dict = field(default_factory=dict)
     test_sequences: int | None = None
+    seeds_override: tuple[int, ...] | None = None
 
     @classmethod
     def from_yaml(cls, path: str | Path) -> "ReportConfig":
@@ -94,6 +95,14 @@ class ReportConfig:
         if config.stability not in ("full", "small", "off"):
             raise ValueError(f"{path}: stability must be full, small or off")
         return config
+
+    def with_seeds(self, seeds: tuple[int, ...]) -> "ReportConfig":
+        """The same report over ``seeds`` for every model (``swingar report
+        --seeds 0`` trains and measures one seed of each ablation)."""
+        if not seeds or any(seed < 0 for seed in seeds):
+            raise ValueError(f"seeds must be non-negative integers, got {list(seeds)}")
+        return replace(self, models=tuple(replace(m, seeds=tuple(seeds)) for m in self.models),
+                       seeds_override=tuple(seeds))
 
 
 def _stack(configs) -> tuple[str, ...] | None:
@@ -279,13 +288,14 @@ def run_report(config: ReportConfig, progress: bool = True, log=print) -> Path:
                                 config.streaming_frames) if first_estimator else [])
     extra = {}
     for name, dataset in config.extra_tests.items():
+        log(f"extra test: {name}")
         extra_sequences = load_test_sequences(_test_split(dataset), body)
-        first = config.models[0]
-        estimator, data = load_estimator(checkpoints[f"{first.name} (seed {first.seeds[0]})"])
-        extra[name] = {"estimator": evaluate_estimator(first.name, estimator, extra_sequences,
-                                                       data.get("sigma", 0.1),
-                                                       data.get("seed", 0)).row(),
-                       "rigid": evaluate_rigid(extra_sequences).row()}
+        rows_ = []
+        for model in config.models:
+            estimator, data = load_estimator(checkpoints[f"{model.name} (seed {model.seeds[0]})"])
+            rows_.append(evaluate_estimator(model.name, estimator, extra_sequences,
+                                            data.get("sigma", 0.1), data.get("seed", 0)).row())
+        extra[name] = {"estimators": rows_, "rigid": evaluate_rigid(extra_sequences).row()}
     stability = []
     if config.stability != "off":
         from swingar_pyg.eval.stability import FULL, SMALL, run_stability

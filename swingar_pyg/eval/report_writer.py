@@ -283,8 +283,7 @@ def write_report(out: Path, config, *, machine, test_path, sequences, results, p
     for name, rows_ in extra.items():
         lines += [f"## {name}", "", "| method | error mean / RMSE / p95 (mm) | ms per frame |",
                   "|---|---|---|"]
-        for key in ("estimator", "rigid"):
-            row = rows_[key]
+        for row in rows_["estimators"] + [rows_["rigid"]]:
             lines.append(f"| {row['method']} | {row['mean_mm']:.1f} / {row['rmse_mm']:.1f} / "
                          f"{row['p95_mm']:.1f} | {row['ms_per_frame']:.1f} |")
         lines.append("")
@@ -296,8 +295,10 @@ def write_report(out: Path, config, *, machine, test_path, sequences, results, p
                   f"ValueError, {len(bad)} failing"
                   + (": " + ", ".join(f"{r.component} / {r.case}" for r in bad) if bad else "")
                   + ".", "", stability_table(stability), ""]
+    seeds = (" --seeds " + " ".join(map(str, config.seeds_override))
+             if config.seeds_override else "")
     lines += ["## Reproduce", "", "```bash", "OMP_NUM_THREADS=1 .venv/bin/swingar report -c "
-              f"configs/report/{config.name}.yaml", "```", ""]
+              f"configs/report/{config.name}.yaml{seeds}", "```", ""]
     report = out / "report.md"
     _write_text(report, "\n".join(lines))
     payload = {"config": {k: v for k, v in config.__dict__.items() if k != "models"},
