@@ -2,18 +2,23 @@
 
     OMP_NUM_THREADS=1 python benchmarks/bench_sim_crosscheck.py           # ~25 minutes, one core
     OMP_NUM_THREADS=1 python benchmarks/bench_sim_crosscheck.py --quick   # one short scene
+    # the bending model alone: XPBD with dihedral (hinge) bending against VBD, ~25 minutes
+    OMP_NUM_THREADS=1 python benchmarks/bench_sim_crosscheck.py --name bench_sim_dihedral \
+        --runs "XPBD 50x2" "XPBD 100x4" "XPBD dihedral 50x2" "XPBD dihedral 100x4" "VBD 20x20"
 
 Scene: a procedural knee-length skirt (``--vertices``) on the default anny body, for each of
 ``--motions``. Runs: the XPBD solver at its dataset setting (50x2) and at the fine reference
 (100x4); newton's VBD solver (``pip install swingar-pyg[newton]``) at its default (10x10) and at
-a fine setting (20x20), with cloth-like bending and with very stiff bending. Each solver's own
+a fine setting (20x20), with cloth-like bending and with very stiff bending; XPBD with dihedral
+bending at VBD's bending stiffness (``bending="dihedral"``). Each solver's own
 convergence error (default vs fine of the same solver) is set against the disagreement of the
 two fine solutions: if the second is much larger, the models, not the solves, decide where
 the cloth goes, and no estimator can be said to be closer to the truth than that. Also
 recorded: cost, largest strain, share of vertices inside the body, and how far the hem hangs
 from the body axis (a flared skirt's flare is where the two models differ).
 
-Writes ``benchmarks/results/bench_sim_crosscheck.json`` and ``.png``.
+Writes ``benchmarks/results/<--name>.json`` and ``.png`` (default ``bench_sim_crosscheck``);
+``--runs`` keeps some of the runs, and the comparisons between them.
 """
 
 from __future__ import annotations
@@ -46,6 +51,11 @@ def runs(fps: float) -> dict[str, XPBDSettings | VBDSettings]:
         "VBD 10x10": VBDSettings(fps=fps),
         "VBD 20x20": VBDSettings(fps=fps, substeps=20, iterations=20),
         "VBD 10x10 stiff bending": VBDSettings(fps=fps, bend_stiffness=STIFF_BENDING),
+        "XPBD dihedral 50x2": XPBDSettings(fps=fps, bending="dihedral",
+                                           bend_stiffness=VBDSettings.bend_stiffness),
+        "XPBD dihedral 100x4": XPBDSettings(fps=fps, substeps=100, iterations=4,
+                                            bending="dihedral",
+                                            bend_stiffness=VBDSettings.bend_stiffness),
     }
 
 
@@ -55,6 +65,9 @@ COMPARISONS = [
     ("VBD 10x10 vs VBD 20x20", "VBD 10x10", "VBD 20x20"),
     ("XPBD 100x4 vs VBD 20x20", "XPBD 100x4", "VBD 20x20"),
     ("XPBD 100x4 vs VBD stiff bending", "XPBD 100x4", "VBD 10x10 stiff bending"),
+    ("XPBD dihedral 50x2 vs 100x4", "XPBD dihedral 50x2", "XPBD dihedral 100x4"),
+    ("XPBD distance vs dihedral bending", "XPBD 100x4", "XPBD dihedral 100x4"),
+    ("XPBD dihedral 100x4 vs VBD 20x20", "XPBD dihedral 100x4", "VBD 20x20"),
 ]
 
 
@@ -71,11 +84,12 @@ def plot(scenes: list[dict]):
     import matplotlib.pyplot as plt
 
     figure, (gap_axis, hem_axis) = plt.subplots(1, 2, figsize=(12, 4.2))
-    width = 0.8 / len(COMPARISONS)
-    for k, (label, _, _) in enumerate(COMPARISONS):
+    labels = list(scenes[0]["comparisons"])
+    width = 0.8 / len(labels)
+    for k, label in enumerate(labels):
         means = [scene["comparisons"][label]["mean_mm"] for scene in scenes]
         p95 = [scene["comparisons"][label]["p95_mm"] for scene in scenes]
-        positions = np.arange(len(scenes)) + (k - (len(COMPARISONS) - 1) / 2) * width
+        positions = np.arange(len(scenes)) + (k - (len(labels) - 1) / 2) * width
         gap_axis.bar(positions, means, width, label=label)
         gap_axis.errorbar(positions, means, yerr=[np.zeros(len(p95)), np.subtract(p95, means)],
                           fmt="none", ecolor="k", capsize=2, lw=0.8)
@@ -103,7 +117,14 @@ def main() -> None:
     parser.add_argument("--motions", nargs="+", default=["sway", "walk", "spin_stop"])
     parser.add_argument("--seconds", type=float, default=2.0)
     parser.add_argument("--quick", action="store_true", help="500 vertices, sway, 0.5 s")
+    parser.add_argument("--runs", nargs="+", default=None, help="only these runs (names as in "
+                        "the output); comparisons need both of their runs")
+    parser.add_argument("--name", default="bench_sim_crosscheck", help="results file name")
     args = parser.parse_args()
+    chosen = runs(30.0)
+    unknown = set(args.runs or ()) - set(chosen)
+    if unknown:
+        parser.error(f"unknown runs {sorted(unknown)}; choose from {', '.join(chosen)}")
     if args.quick:
         args.vertices, args.motions, args.seconds = 500, ["sway"], 0.5
     torch.set_num_threads(1)
@@ -119,6 +140,8 @@ def main() -> None:
         motion = procedural_motion(motion_name, body.joint_names, seconds=args.seconds)
         positions, scene_runs = {}, {}
         for name, settings in runs(motion.fps).items():
+            if args.runs and name not in args.runs:
+                continue
             result = simulate_sequence(body, shape, garment, motion, settings).result
             positions[name] = result.positions
             scene_runs[name] = {
@@ -134,6 +157,8 @@ def main() -> None:
                   f"hem radius {100 * np.mean(r['hem_radius_m']):.1f} cm", flush=True)
         comparisons = {}
         for label, run, reference in COMPARISONS:
+            if run not in positions or reference not in positions:
+                continue
             distance = (positions[run] - positions[reference]).norm(dim=-1)
             comparisons[label] = {"mean_mm": 1e3 * float(distance.mean()),
                                   "p95_mm": 1e3 * float(distance.quantile(0.95)),
@@ -146,7 +171,7 @@ def main() -> None:
     payload = {"machine": machine_info(), "garment": garment.name,
                "vertices": garment.mesh.num_vertices, "seconds": args.seconds,
                "scenes": scenes}
-    path = write_results("bench_sim_crosscheck" + ("_quick" if args.quick else ""), payload,
+    path = write_results(args.name + ("_quick" if args.quick else ""), payload,
                          plot(scenes))
     print(f"wrote {path} and its .png")
 

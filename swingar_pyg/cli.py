@@ -49,6 +49,11 @@ def _simulate(args: argparse.Namespace) -> int:
     solver = {"xpbd": XPBDSettings, "vbd": VBDSettings}[args.solver]
     steps = {name: value for name, value in (("substeps", args.substeps),
                                                ("iterations", args.iterations)) if value}
+    if args.bending:
+        if args.solver != "xpbd":
+            raise ValueError("--bending chooses the XPBD bending model; VBD always bends by "
+                             "dihedral angles")
+        steps["bending"] = args.bending
     settings = solver(fps=args.fps, **steps)
     sequence = simulate_sequence(body, shape, garment, motion, settings, progress=True)
     out = Path(args.out)
@@ -160,6 +165,9 @@ def build_parser() -> argparse.ArgumentParser:
     simulate.add_argument("--solver", choices=("xpbd", "vbd"), default="xpbd",
                           help="xpbd (the datasets') or vbd (newton's, pip install "
                                "'swingar-pyg[newton]')")
+    simulate.add_argument("--bending", choices=("distance", "dihedral"), default=None,
+                          help="XPBD bending model (default: distance, the datasets'; "
+                               "dihedral: hinge angles at VBD's stiffness)")
     simulate.add_argument("--substeps", type=int, default=None,
                           help="per frame (default: the solver's, XPBD 50, VBD 10)")
     simulate.add_argument("--iterations", type=int, default=None,

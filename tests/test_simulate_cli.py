@@ -41,6 +41,23 @@ def test_simulate_with_the_vbd_solver_stores_its_settings(tmp_path, capsys):
         assert np.isfinite(sequence['garment_vertices'][:]).all()
 
 
+def test_simulate_with_dihedral_bending_stores_the_model(tmp_path, capsys):
+    pytest.importorskip('anny')
+    import json
+
+    out = tmp_path / 'run'
+    assert main(['simulate', '--bending', 'dihedral', '--motion', 'sway', '--seconds', '0.2',
+                 '--vertices', '150', '--substeps', '5', '--no-preview', '--out', str(out)]) == 0
+    with h5py.File(out / 'sequence.h5') as file:
+        sequence = file['sequences/000000']
+        settings = json.loads(sequence.attrs['settings'])
+        assert settings['bending'] == 'dihedral' and settings['bend_stiffness'] == 1e-3
+        assert np.isfinite(sequence['garment_vertices'][:]).all()
+    with pytest.raises(SystemExit):
+        main(['simulate', '--solver', 'vbd', '--bending', 'distance', '--out', str(out)])
+    assert '--bending chooses the XPBD bending model' in capsys.readouterr().err
+
+
 def test_simulate_rejects_an_unknown_motion(tmp_path, capsys):
     pytest.importorskip('anny')
     with pytest.raises(SystemExit):

@@ -1,4 +1,31 @@
-"""Distance constraints of a cloth mesh, grouped into colours for parallel Gauss–Seidel."""
+r"""Constraints of a cloth mesh: distances (stretch edges, or the opposite corners of
+adjacent triangles as a simple bending model), grouped into colours for parallel
+Gauss–Seidel, and dihedral angles across interior edges (hinges), solved together.
+
+A hinge ``(x1, x2, x3, x4)`` has the shared edge :math:`\mathbf{e} = \mathbf{x}_4 -
+\mathbf{x}_3` and the triangles :math:`(\mathbf{x}_1, \mathbf{x}_3, \mathbf{x}_4)`,
+:math:`(\mathbf{x}_2, \mathbf{x}_4, \mathbf{x}_3)` with normals
+:math:`\mathbf{n}_1 = (\mathbf{x}_1 - \mathbf{x}_3) \times (\mathbf{x}_1 - \mathbf{x}_4)`,
+:math:`\mathbf{n}_2 = (\mathbf{x}_2 - \mathbf{x}_4) \times (\mathbf{x}_2 - \mathbf{x}_3)`;
+its signed angle is
+
+.. math::
+    \theta = \operatorname{atan2}\big((\hat{\mathbf{n}}_1 \times \hat{\mathbf{n}}_2)
+    \cdot \hat{\mathbf{e}},\; \hat{\mathbf{n}}_1 \cdot \hat{\mathbf{n}}_2\big)
+
+(0 for a flat, consistently oriented pair), with the gradient of Bridson et al. (2003),
+:math:`\mathbf{m}_k = \mathbf{n}_k / \|\mathbf{n}_k\|^2`:
+
+.. math::
+    \nabla_1\theta = -\|\mathbf{e}\|\,\mathbf{m}_1, \quad
+    \nabla_2\theta = -\|\mathbf{e}\|\,\mathbf{m}_2, \quad
+    \nabla_3\theta = -\tfrac{(\mathbf{x}_1 - \mathbf{x}_4)\cdot\mathbf{e}}{\|\mathbf{e}\|}
+    \mathbf{m}_1 - \tfrac{(\mathbf{x}_2 - \mathbf{x}_4)\cdot\mathbf{e}}{\|\mathbf{e}\|}
+    \mathbf{m}_2, \quad
+    \nabla_4\theta = \tfrac{(\mathbf{x}_1 - \mathbf{x}_3)\cdot\mathbf{e}}{\|\mathbf{e}\|}
+    \mathbf{m}_1 + \tfrac{(\mathbf{x}_2 - \mathbf{x}_3)\cdot\mathbf{e}}{\|\mathbf{e}\|}
+    \mathbf{m}_2.
+"""
 
 from __future__ import annotations
 
@@ -50,29 +77,114 @@ def bending_pairs(mesh: Mesh) -> np.ndarray:
     return np.unique(pairs, axis=0)
 
 
-def colour_constraints(pairs: np.ndarray, num_vertices: int) -> np.ndarray:
-    """Greedy colouring: each pair gets the smallest colour unused at both ends."""
-    colours = np.empty(len(pairs), dtype=np.int64)
+def hinges(mesh: Mesh) -> np.ndarray:
+    """``(H, 4)`` hinges ``(x1, x2, x3, x4)`` of the interior edges ``x3 -> x4`` shared
+    by exactly two triangles: ``x1`` opposite the edge in the triangle that runs
+    ``x3 -> x4``, ``x2`` in the other (edges of three or more triangles are left out)."""
+    faces = mesh.faces
+    corners = np.concatenate([faces[:, [0, 1, 2]], faces[:, [1, 2, 0]], faces[:, [2, 0, 1]]])
+    edge = np.sort(corners[:, :2], axis=1)
+    order = np.lexsort((edge[:, 1], edge[:, 0]))
+    corners, edge = corners[order], edge[order]
+    first = np.concatenate([[True], np.any(edge[1:] != edge[:-1], axis=1)])
+    group = np.cumsum(first) - 1
+    size = np.bincount(group)
+    start = np.flatnonzero(first)[size == 2]
+    one, two = corners[start], corners[start + 1]
+    hinge = np.stack([one[:, 2], two[:, 2], one[:, 0], one[:, 1]], axis=1)
+    return hinge[hinge[:, 0] != hinge[:, 1]]
+
+
+def colour_constraints(rows: np.ndarray, num_vertices: int) -> np.ndarray:
+    """Greedy colouring: each constraint (a row of vertex indices) gets the smallest
+    colour unused at all its vertices."""
+    colours = np.empty(len(rows), dtype=np.int64)
     used: list[set[int]] = [set() for _ in range(num_vertices)]
-    for k, (i, j) in enumerate(pairs):
-        taken = used[i] | used[j]
+    for k, row in enumerate(rows.tolist()):
+        taken = set().union(*(used[i] for i in row))
         colour = 0
         while colour in taken:
             colour += 1
         colours[k] = colour
-        used[i].add(colour)
-        used[j].add(colour)
+        for i in row:
+            used[i].add(colour)
     return colours
+
+
+def _coloured(rows: np.ndarray, num_vertices: int) -> tuple[np.ndarray, tuple]:
+    """``rows`` sorted by colour, and each colour's ``(start, stop)``."""
+    colours = colour_constraints(rows, num_vertices)
+    order = np.argsort(colours, kind="stable")
+    colours = colours[order]
+    bounds = np.flatnonzero(np.diff(colours)) + 1
+    starts = np.concatenate([[0], bounds])
+    stops = np.concatenate([bounds, [len(rows)]])
+    return order, tuple(zip(starts.tolist(), stops.tolist()))
 
 
 def distance_constraints(pairs: np.ndarray, vertices: np.ndarray) -> DistanceConstraints:
     """Coloured constraints for ``pairs`` at their rest distances in ``vertices``."""
-    colours = colour_constraints(pairs, len(vertices))
-    order = np.argsort(colours, kind="stable")
-    pairs, colours = pairs[order], colours[order]
-    bounds = np.flatnonzero(np.diff(colours)) + 1
-    starts = np.concatenate([[0], bounds])
-    stops = np.concatenate([bounds, [len(pairs)]])
+    order, slices = _coloured(pairs, len(vertices))
+    pairs = pairs[order]
     lengths = np.linalg.norm(vertices[pairs[:, 0]] - vertices[pairs[:, 1]], axis=1)
-    return DistanceConstraints(torch.from_numpy(pairs), torch.from_numpy(lengths),
-                               tuple(zip(starts.tolist(), stops.tolist())))
+    return DistanceConstraints(torch.from_numpy(pairs), torch.from_numpy(lengths), slices)
+
+
+@dataclass(frozen=True)
+class DihedralConstraints:
+    """Hinges kept at their rest angles, solved all at once (Jacobi).
+
+    Attributes:
+        hinges: ``(H, 4)`` long ``(x1, x2, x3, x4)`` (see :func:`hinges`).
+        rest_angles: ``(H,)`` :math:`\theta_0` in ``(-pi, pi]``.
+        rest_lengths: ``(H,)`` rest length of each shared edge.
+        share: ``(N, 1)`` one over the number of hinges at each vertex (1 where none): the
+            corrections a vertex receives in one sweep are averaged.
+    """
+
+    hinges: Tensor
+    rest_angles: Tensor
+    rest_lengths: Tensor
+    share: Tensor
+
+    def to(self, device: torch.device | str, dtype: torch.dtype) -> "DihedralConstraints":
+        return DihedralConstraints(self.hinges.to(device), self.rest_angles.to(device, dtype),
+                                   self.rest_lengths.to(device, dtype),
+                                   self.share.to(device, dtype))
+
+
+def dihedral_angles(x1: Tensor, x2: Tensor, x3: Tensor, x4: Tensor
+                    ) -> tuple[Tensor, tuple[Tensor, Tensor, Tensor, Tensor], Tensor]:
+    """Signed angles of hinges ``(..., 3)`` each, their gradients with respect to the
+    four vertices, and whether both triangles have area (else the gradients are 0)."""
+    e = x4 - x3
+    length = e.norm(dim=-1, keepdim=True)
+    n1 = torch.linalg.cross(x1 - x3, x1 - x4)
+    n2 = torch.linalg.cross(x2 - x4, x2 - x3)
+    area1, area2 = (n1 * n1).sum(-1, keepdim=True), (n2 * n2).sum(-1, keepdim=True)
+    # a triangle thinner than 1e-6 of its edge squared has no reliable normal
+    tiny = (1e-6 * length.square()).square()
+    valid = (area1 > tiny) & (area2 > tiny)
+    m1 = torch.where(valid, n1 / area1.clamp_min(torch.finfo(x1.dtype).tiny), 0.0)
+    m2 = torch.where(valid, n2 / area2.clamp_min(torch.finfo(x1.dtype).tiny), 0.0)
+    unit1 = n1 / area1.sqrt().clamp_min(torch.finfo(x1.dtype).tiny)
+    unit2 = n2 / area2.sqrt().clamp_min(torch.finfo(x1.dtype).tiny)
+    axis = e / length.clamp_min(torch.finfo(x1.dtype).tiny)
+    angle = torch.atan2((torch.linalg.cross(unit1, unit2) * axis).sum(-1),
+                        (unit1 * unit2).sum(-1))
+    a13, a14, a23, a24 = (((x - y) * axis).sum(-1, keepdim=True)
+                          for x, y in ((x1, x3), (x1, x4), (x2, x3), (x2, x4)))
+    gradients = (-length * m1, -length * m2, -a14 * m1 - a24 * m2, a13 * m1 + a23 * m2)
+    return angle, gradients, valid.squeeze(-1)
+
+
+def dihedral_constraints(mesh: Mesh) -> DihedralConstraints:
+    """The hinges of ``mesh`` at the angles and edge lengths of its vertices."""
+    rows = hinges(mesh)
+    x = torch.from_numpy(mesh.vertices[rows])
+    angle, _, _ = dihedral_angles(*x.unbind(1))
+    lengths = np.linalg.norm(mesh.vertices[rows[:, 3]] - mesh.vertices[rows[:, 2]], axis=1)
+    count = np.bincount(rows.reshape(-1), minlength=mesh.num_vertices)
+    share = 1.0 / np.maximum(count, 1)
+    return DihedralConstraints(torch.from_numpy(rows), angle, torch.from_numpy(lengths),
+                               torch.from_numpy(share)[:, None])
