@@ -1,6 +1,7 @@
-"""Garments fitted on a body in its rest pose: procedural skirts of any length, flare,
-resolution and triangulation, with the vertices pinned to the body and the skinning
-weights carried over from the body.
+"""Garments fitted on a body in its rest pose: procedural skirts and dresses of any
+length, flare, resolution and triangulation (sewn t-shirts and jumpsuits:
+:mod:`~swingar_pyg.world.panel_garment`), with the vertices pinned to the body and
+the skinning weights carried over from the body.
 """
 
 from __future__ import annotations
@@ -128,12 +129,17 @@ class ShippedGarmentSpec:
 
 
 def garment_spec(entry: dict):
-    """A garment of a dataset config: ``{kind: skirt | dress | shipped, ...}``
-    (``skirt`` when no kind is given) with the fields of :class:`SkirtSpec`,
-    :class:`DressSpec` or :class:`ShippedGarmentSpec`."""
+    """A garment of a dataset config: ``{kind: skirt | dress | tshirt | jumpsuit |
+    shipped, ...}`` (``skirt`` when no kind is given) with the fields of
+    :class:`SkirtSpec`, :class:`DressSpec`,
+    :class:`~swingar_pyg.world.panel_garment.TShirtSpec`,
+    :class:`~swingar_pyg.world.panel_garment.JumpsuitSpec` or :class:`ShippedGarmentSpec`."""
+    from swingar_pyg.world.panel_garment import JumpsuitSpec, TShirtSpec
+
     entry = dict(entry)
     kind = entry.pop("kind", "skirt")
-    kinds = {"skirt": SkirtSpec, "dress": DressSpec, "shipped": ShippedGarmentSpec}
+    kinds = {"skirt": SkirtSpec, "dress": DressSpec, "tshirt": TShirtSpec,
+             "jumpsuit": JumpsuitSpec, "shipped": ShippedGarmentSpec}
     if kind not in kinds:
         raise ValueError(f"unknown garment kind {kind!r}; use {', '.join(kinds)}")
     return kinds[kind](**entry)
@@ -148,7 +154,11 @@ def fit_garment(spec, body: "BodyModel", shape) -> Garment:
         suffix = f"-s{spec.subdivisions}" if spec.subdivisions else ""
         return Garment(garment.name + suffix, garment.mesh, garment.pinned, garment.skin_indices,
                        garment.skin_weights, garment.fit)
-    return fit_procedural_skirt(spec, body, shape)
+    if isinstance(spec, SkirtSpec):
+        return fit_procedural_skirt(spec, body, shape)
+    from swingar_pyg.world.panel_garment import fit_sewn_garment
+
+    return fit_sewn_garment(spec, body, shape)
 
 
 def body_envelope(vertices: np.ndarray, keep: np.ndarray, heights: np.ndarray,

@@ -1,0 +1,114 @@
+import numpy as np
+import pytest
+import torch
+
+from swingar_pyg.geometry.mesh import boundary_edges
+from swingar_pyg.world.garment import fit_garment, garment_spec
+from swingar_pyg.world.panel_garment import (
+    JumpsuitSpec,
+    Pattern,
+    TShirtSpec,
+    sew_panels,
+    triangulate_pattern,
+)
+
+
+def euler_and_loops(faces: np.ndarray) -> tuple[int, int, int]:
+    """Euler characteristic, boundary loops, and edges used by more than two faces."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), 1)
+    unique, counts = np.unique(edges, axis=0, return_counts=True)
+    vertices = len(np.unique(faces))
+    boundary = boundary_edges(faces)
+    n = faces.max() + 1
+    graph = coo_matrix((np.ones(len(boundary)), (boundary[:, 0], boundary[:, 1])), (n, n))
+    _, label = connected_components(graph, directed=False)
+    loops = len(np.unique(label[np.unique(boundary)])) if len(boundary) else 0
+    return vertices - len(unique) + len(faces), loops, int((counts > 2).sum())
+
+
+@pytest.mark.parametrize('opening, expected', [([True, False, False, False], (1, 1)),
+                                               ([True, False, True, False], (0, 2))])
+def test_two_sewn_panels_close_into_a_bag_or_a_tube(opening, expected):
+    square = Pattern(np.array([[0.0, 0.0], [0.4, 0.0], [0.4, 0.4], [0.0, 0.4]]),
+                     np.array(opening))
+    for jitter in (0.0, 0.35):
+        points, triangles, on_seam = triangulate_pattern(square, 600, jitter=jitter, seed=3)
+        front, back, faces = sew_panels(points, triangles, on_seam)
+        assert euler_and_loops(faces) == (*expected, 0)
+        assert 500 < faces.max() + 1 < 700
+        # seam points are one vertex on both panels, the others two
+        used = front >= 0
+        assert np.array_equal(front[used & on_seam], back[used & on_seam])
+        assert not np.isin(back[used & ~on_seam], front).any()
+
+
+@pytest.fixture(scope='module')
+def anny():
+    pytest.importorskip('anny')
+    from swingar_pyg.world.body import AnnyBody
+
+    body = AnnyBody()
+    return body, body.default_shape()
+
+
+@pytest.mark.parametrize('spec, holes, top', [
+    (TShirtSpec(vertices=600), 4, 'Neck'), (TShirtSpec(vertices=3000, jitter=0.3), 4, 'Neck'),
+    (JumpsuitSpec(vertices=800, leg=0.5), 3, 'Spine1'), (JumpsuitSpec(vertices=4000), 3, 'Spine1')])
+def test_sewn_garments_are_one_surface_outside_the_body_pinned_at_the_top(anny, spec, holes, top):
+    from swingar_pyg.collision.reference import BodySurface
+
+    body, shape = anny
+    garment = fit_garment(garment_spec({'kind': type(spec).__name__[:-4].lower(),
+                                        **spec.__dict__}), body, shape)
+    mesh = garment.mesh
+    assert garment.name == spec.name
+    assert euler_and_loops(mesh.faces) == (2 - holes, holes, 0)
+    assert 0.85 * spec.vertices < mesh.num_vertices < 1.15 * spec.vertices
+    rest = body.rest_vertices(shape).numpy().astype(np.float64)
+    depth, _ = BodySurface(rest, body.faces.numpy()).signed_distance(mesh.vertices)
+    assert depth.max() < -0.99 * spec.clearance  # outside, at least the clearance away
+    assert np.allclose(garment.fit, -depth, atol=1e-6)
+    # faces point away from the body: from the nearest body vertex to the face centre
+    from scipy.spatial import cKDTree
+
+    v, f = mesh.vertices, mesh.faces
+    normals = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+    centres = v[f].mean(axis=1)
+    nearest = rest[cKDTree(rest).query(centres)[1]]
+    assert (np.einsum('ij,ij->i', normals, centres - nearest) > 0).mean() > 0.9
+    # pinned: the top opening only (the neckline or the chest line), followed by the torso
+    joints = body.pose(shape, torch.eye(3).expand(1, len(body.joint_names), 3, 3),
+                       torch.zeros(1, 3)).joint_positions[0]
+    top_z = float(joints[body.joint_names.index(top), 2])
+    assert np.abs(v[garment.pinned, 2] - top_z).max() < 0.06
+    assert set(garment.pinned) <= set(np.unique(boundary_edges(f)))
+
+
+def test_a_sewn_tshirt_swings_on_a_walk_without_tearing(anny):
+    from swingar_pyg.sim import XPBDSettings
+    from swingar_pyg.world.motion_library import make_motion
+    from swingar_pyg.world.sequence import simulate_sequence
+
+    body, shape = anny
+    garment = fit_garment(TShirtSpec(vertices=400), body, shape)
+    motion = make_motion('walk', body, shape, seconds=0.5, fps=30)
+    sequence = simulate_sequence(body, shape, garment, motion,
+                                 XPBDSettings(substeps=20, iterations=2, settle_frames=5))
+    result = sequence.result
+    assert torch.isfinite(result.positions).all()
+    assert result.max_stretch.max() < 0.15 and result.mean_stretch.mean() < 0.01
+    assert np.nanmax(result.penetration) < 0.01
+
+
+@pytest.mark.parametrize('kind, kwargs, message', [
+    ('tshirt', {'length': 2.0}, 'TShirtSpec.length must be in'),
+    ('tshirt', {'vertices': 50}, 'at least 200 vertices'),
+    ('jumpsuit', {'leg': 0.1}, 'JumpsuitSpec.leg must be in'),
+    ('jumpsuit', {'clearance': 0.0}, 'clearance must be in'),
+    ('poncho', {}, "unknown garment kind 'poncho'")])
+def test_bad_sewn_garment_specs_are_refused(kind, kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        garment_spec({'kind': kind, **kwargs})
