@@ -28,7 +28,7 @@ def _simulate(args: argparse.Namespace) -> int:
     from swingar_pyg.sim import VBDSettings, XPBDSettings
     from swingar_pyg.viz.preview import render_sequence
     from swingar_pyg.world.body import AnnyBody
-    from swingar_pyg.world.garment import SkirtSpec, fit_procedural_skirt
+    from swingar_pyg.world.garment import fit_garment, garment_spec
     from swingar_pyg.world.motion_library import make_motion
     from swingar_pyg.world.sequence import simulate_sequence
     from swingar_pyg.world.sequence_file import write_sequences
@@ -41,9 +41,14 @@ def _simulate(args: argparse.Namespace) -> int:
 
         garment = fit_shipped_garment(args.garment, body, shape)
     else:
-        spec = SkirtSpec(length=args.length, flare=args.flare, vertices=args.vertices,
-                         jitter=args.jitter)
-        garment = fit_procedural_skirt(spec, body, shape)
+        entry = {"kind": args.kind, "vertices": args.vertices, "jitter": args.jitter}
+        for name in ("length", "flare"):
+            if getattr(args, name) is not None:
+                if args.kind == "jumpsuit":
+                    raise ValueError(f"--{name} is not a jumpsuit's (its legs: a dataset "
+                                     "config's leg, ease and flare)")
+                entry[name] = getattr(args, name)
+        garment = fit_garment(garment_spec(entry), body, shape)
     motion = make_motion(args.motion, body, shape, seconds=args.seconds, fps=args.fps,
                          speed=args.speed, amplitude=args.amplitude, mirror=args.mirror)
     solver = {"xpbd": XPBDSettings, "vbd": VBDSettings}[args.solver]
@@ -140,7 +145,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo.set_defaults(run=_demo)
 
     simulate = commands.add_parser(
-        "simulate", help="simulate a procedural skirt on the anny body: HDF5 + preview GIF")
+        "simulate", help="simulate a procedural garment on the anny body: HDF5 + preview GIF")
     simulate.add_argument("--motion", default="sway",
                           help="a procedural family (sway, twist, spin_stop, kick, jump, walk), "
                                "a shipped CMU clip (cmu_02_01_walk_delfem2, "
@@ -155,8 +160,11 @@ def build_parser() -> argparse.ArgumentParser:
                           help="a shipped MakeHuman piece (e.g. dress_skirt_knee, tshirt_loose, "
                                "overall_jumpsuit) fitted to the body; default: a procedural skirt "
                                "from --length/--flare/--vertices/--jitter")
-    simulate.add_argument("--length", type=float, default=0.55, help="skirt length, m")
-    simulate.add_argument("--flare", type=float, default=0.35)
+    simulate.add_argument("--kind", choices=("skirt", "dress", "tshirt", "jumpsuit"),
+                          default="skirt", help="procedural garment (default: skirt)")
+    simulate.add_argument("--length", type=float, default=None,
+                          help="waist (dress: chest; t-shirt: neck) to hem, m")
+    simulate.add_argument("--flare", type=float, default=None)
     simulate.add_argument("--vertices", type=int, default=1500)
     simulate.add_argument("--jitter", type=float, default=0.0,
                           help="> 0 for an irregular triangulation")

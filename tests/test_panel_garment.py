@@ -35,8 +35,9 @@ def test_two_sewn_panels_close_into_a_bag_or_a_tube(opening, expected):
     square = Pattern(np.array([[0.0, 0.0], [0.4, 0.0], [0.4, 0.4], [0.0, 0.4]]),
                      np.array(opening))
     for jitter in (0.0, 0.35):
-        points, triangles, on_seam = triangulate_pattern(square, 600, jitter=jitter, seed=3)
-        front, back, faces = sew_panels(points, triangles, on_seam)
+        cut = triangulate_pattern(square, 600, jitter=jitter, seed=3)
+        on_seam = cut.on_seam
+        front, back, faces = sew_panels(cut.points, cut.triangles, on_seam)
         assert euler_and_loops(faces) == (*expected, 0)
         assert 500 < faces.max() + 1 < 700
         # seam points are one vertex on both panels, the others two
@@ -84,6 +85,9 @@ def test_sewn_garments_are_one_surface_outside_the_body_pinned_at_the_top(anny, 
                        torch.zeros(1, 3)).joint_positions[0]
     top_z = float(joints[body.joint_names.index(top), 2])
     assert np.abs(v[garment.pinned, 2] - top_z).max() < 0.06
+    pinned_x = v[garment.pinned, 0]
+    assert pinned_x.min() < -0.05 and pinned_x.max() > 0.05  # across the whole opening
+    assert abs(pinned_x.mean()) < 0.02  # symmetric
     assert set(garment.pinned) <= set(np.unique(boundary_edges(f)))
 
 
@@ -112,3 +116,22 @@ def test_a_sewn_tshirt_swings_on_a_walk_without_tearing(anny):
 def test_bad_sewn_garment_specs_are_refused(kind, kwargs, message):
     with pytest.raises(ValueError, match=message):
         garment_spec({'kind': kind, **kwargs})
+
+
+@pytest.mark.slow
+def test_the_full_configs_sewn_garments_fit_every_body_shape(anny):
+    """Every t-shirt and jumpsuit of configs/data/full.yaml on its four body shapes and
+    on the all-1 body: the right holes and outside the body (~2 minutes)."""
+    from swingar_pyg.world.dataset import DatasetConfig
+
+    body, _ = anny
+    config = DatasetConfig.from_yaml('configs/data/full.yaml')
+    specs = {g for split in config.garments.values() for g in split
+             if isinstance(g, (TShirtSpec, JumpsuitSpec))}
+    assert len(specs) == 6
+    for shape in list(config.body_shapes) + [[1.0] * 6]:
+        for spec in specs:
+            garment = fit_garment(spec, body, torch.tensor(shape, dtype=torch.float32))
+            holes = 4 if isinstance(spec, TShirtSpec) else 3
+            assert euler_and_loops(garment.mesh.faces) == (2 - holes, holes, 0), spec.name
+            assert garment.fit.min() > 0.7 * spec.clearance, (spec.name, shape)

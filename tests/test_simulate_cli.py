@@ -58,6 +58,17 @@ def test_simulate_with_dihedral_bending_stores_the_model(tmp_path, capsys):
     assert '--bending chooses the XPBD bending model' in capsys.readouterr().err
 
 
+def test_simulate_a_sewn_jumpsuit(tmp_path, capsys):
+    pytest.importorskip('anny')
+    out = tmp_path / 'run'
+    assert main(['simulate', '--kind', 'jumpsuit', '--motion', 'walk', '--seconds', '0.2',
+                 '--vertices', '300', '--substeps', '5', '--no-preview', '--out', str(out)]) == 0
+    assert 'jumpsuit-g0.90-n300-grid' in capsys.readouterr().out
+    with pytest.raises(SystemExit):
+        main(['simulate', '--kind', 'jumpsuit', '--length', '0.5', '--out', str(out)])
+    assert "--length is not a jumpsuit's" in capsys.readouterr().err
+
+
 def test_simulate_rejects_an_unknown_motion(tmp_path, capsys):
     pytest.importorskip('anny')
     with pytest.raises(SystemExit):

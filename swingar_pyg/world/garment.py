@@ -311,16 +311,17 @@ def top_boundary_loops(mesh: Mesh, band: float = 0.1) -> np.ndarray:
     return np.sort(np.concatenate([loop for loop, z in zip(loops, heights) if z >= top - band]))
 
 
-def garment_on_body(name: str, mesh: Mesh, body: "BodyModel", shape) -> Garment:
+def garment_on_body(name: str, mesh: Mesh, body: "BodyModel", shape,
+                    pinned: np.ndarray | None = None) -> Garment:
     """A garment mesh already dressed on ``body``'s rest pose with ``shape``
-    (metres, +Z up), made ready to animate: pinned at its highest boundary loops
-    (:func:`top_boundary_loops`: waistband, neckline, straps; skinned to the
-    torso), skinning transferred from the body, and the fit attribute measured
-    on that body."""
+    (metres, +Z up), made ready to animate: pinned at ``pinned`` or else at its
+    highest boundary loops (:func:`top_boundary_loops`: waistband, neckline,
+    straps; skinned to the torso), skinning transferred from the body, and the
+    fit attribute measured on that body."""
     mesh = as_mesh(mesh.vertices, mesh.faces)
     rest = body.rest_vertices(shape).numpy().astype(np.float64)
     faces = body.faces.numpy()
-    pinned = top_boundary_loops(mesh)
+    pinned = top_boundary_loops(mesh) if pinned is None else np.asarray(pinned, np.int64)
     indices, weights = body.skinning()
     skin_indices, skin_weights = transfer_skinning(mesh.vertices, pinned, rest, body.joint_names,
                                                    indices.numpy(), weights.numpy())

@@ -26,6 +26,7 @@ skinning and the fit attribute are those of
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -43,8 +44,8 @@ _DEPTH_BIN = 0.01
 
 @dataclass(frozen=True)
 class Pattern:
-    """A closed polygon ``(K, 2)`` in the frontal plane (x, z), counter-clockwise,
-    and whether each edge ``k -> k + 1`` is an opening (else a seam)."""
+    """A closed polygon ``(K, 2)`` in the frontal plane (x, z), and whether each
+    edge ``k -> k + 1`` (the last back to the first) is an opening (else a seam)."""
 
     outline: np.ndarray
     opening: np.ndarray
@@ -135,22 +136,22 @@ def tshirt_pattern(spec: TShirtSpec, joints: dict[str, np.ndarray],
     up = np.array([-along[1], along[0]])  # the arm's upper side in the frontal plane
     if up[1] < 0:
         up = -up
-    half_sleeve = 0.06 + spec.ease
-    end = shoulder + spec.sleeve * arm
+    length = np.linalg.norm(arm)
     side = torso_half_width + spec.ease
-    # the underarm point: where the sleeve's lower edge meets the side seam
-    lower_start = shoulder - half_sleeve * up
-    t = (side - lower_start[0]) / along[0] if abs(along[0]) > 1e-6 else 0.0
-    armpit = lower_start + min(max(t, 0.0), spec.sleeve * np.linalg.norm(arm)) * along
-    armpit = np.array([side, min(armpit[1], shoulder[1] - half_sleeve)])
+    # the sleeve's seams run along the upper arm, above and below its axis; the lower
+    # one starts at the armpit, where it meets the side seam
+    top = shoulder + (0.2 * length + spec.ease) * up
+    lower_start = shoulder - (0.15 * length + spec.ease) * up
+    armpit = lower_start + (side - lower_start[0]) / max(along[0], 0.1) * along
+    armpit[0] = side
+    reach = spec.sleeve * length * along
     hem = neck[1] - spec.length
-    neck_half = 0.075
-    left = [(neck_half, neck[1]), tuple(shoulder + half_sleeve * up),
-            tuple(end + half_sleeve * up), tuple(end - half_sleeve * up), tuple(armpit),
+    left = [(0.45 * shoulder[0], neck[1]), tuple(top), tuple(top + reach),
+            tuple(armpit + reach), tuple(armpit),
             (max(side, hip_half_width + spec.ease) + spec.flare, hem), (0.0, hem)]
     # neck -> shoulder seam, sleeve top seam, sleeve end opening, sleeve bottom seam,
     # side seam, hem opening (to the centre)
-    return _half_pattern(left, [False, False, True, False, False, True], top_opening=True)
+    return _half_pattern(left, [False, False, True, False, False, True], neckline=True)
 
 
 def jumpsuit_pattern(spec: JumpsuitSpec, joints: dict[str, np.ndarray],
@@ -166,50 +167,77 @@ def jumpsuit_pattern(spec: JumpsuitSpec, joints: dict[str, np.ndarray],
             (hip_half_width + spec.ease, hip[1]), (centre_x + half_leg, end_z),
             (max(centre_x - half_leg, 0.02), end_z), (0.0, crotch)]
     # chest opening (from the centre), side seam, outer leg seam, leg opening, inseam
-    return _half_pattern(left, [True, False, False, True, False], top_opening=None)
+    return _half_pattern(left, [True, False, False, True, False], neckline=False)
 
 
-def _half_pattern(left: list, left_opening: list[bool], top_opening: bool | None) -> Pattern:
+def _half_pattern(left: list, left_opening: list[bool], neckline: bool) -> Pattern:
     """A pattern symmetric about x = 0 from its left half: points ``P0 .. Pm`` from the
     top down to ``Pm`` on the centre line, and whether each edge ``Pk -> Pk+1`` is an
-    opening. ``P0`` lies on the centre line too when ``top_opening`` is ``None``;
-    otherwise the top edge from the mirrored ``P0`` to ``P0`` (a neckline) joins the
-    halves and ``top_opening`` tells whether it is an opening."""
+    opening. With a ``neckline``, ``P0`` lies off the centre line and an opening joins
+    it to its mirror image; without, ``P0`` lies on the centre line."""
     left = [np.asarray(point, dtype=np.float64) for point in left]
     mirrored = [point * np.array([-1.0, 1.0]) for point in left]
     last = len(left) - 1
-    back = range(last - 1, 0 if top_opening is None else -1, -1)
-    outline = left + [mirrored[k] for k in back]
+    outline = left + [mirrored[k] for k in range(last - 1, -1 if neckline else 0, -1)]
     opening = list(left_opening) + [left_opening[k] for k in range(last - 1, -1, -1)]
-    if top_opening is not None:
-        opening[-1:] = [left_opening[0], top_opening]
+    if neckline:
+        opening.append(True)
     return Pattern(np.array(outline), np.array(opening, dtype=bool))
 
 
 # ------------------------------------------------------------ triangulation
 
+@dataclass(frozen=True)
+class PatternMesh:
+    """A triangulated pattern: ``points`` ``(P, 2)``, ``triangles`` ``(F, 3)``, and for
+    each point the outline edge it lies on (``edge``; -1 inside) and whether it is
+    on a seam (``on_seam``; corners between a seam and an opening are)."""
+
+    points: np.ndarray
+    triangles: np.ndarray
+    edge: np.ndarray
+    on_seam: np.ndarray
+
+
 def triangulate_pattern(pattern: Pattern, vertices: int, jitter: float = 0.0,
-                        seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Points ``(P, 2)`` and triangles ``(F, 3)`` filling ``pattern`` for about
-    ``vertices`` vertices over both panels, and which points lie on a seam."""
+                        seed: int = 0) -> PatternMesh:
+    """Fills ``pattern`` with triangles for about ``vertices`` vertices over both panels.
+
+    No edge inside the pattern may join two seam points (its front and back copies
+    would be one edge of four triangles): such chords get a point at their middle
+    and the triangulation is redone.
+
+    Raises:
+        ValueError: if the outline crosses itself.
+    """
     from matplotlib.path import Path as PolygonPath
     from scipy.spatial import Delaunay
 
     outline = pattern.outline
     edges = np.roll(outline, -1, axis=0) - outline
+    if _crosses_itself(outline):
+        raise ValueError("the garment pattern's outline crosses itself: the garment does not "
+                         "fit this body's proportions (try other lengths or ease)")
     x, z = outline[:, 0], outline[:, 1]
     area = 0.5 * abs(np.dot(x, np.roll(z, -1)) - np.dot(z, np.roll(x, -1)))
     spacing = math.sqrt(2.0 * area / vertices)
-    boundary, on_seam = [], []
+    # Points along an edge sit a hair inside it while triangulating: on a straight run
+    # Delaunay would otherwise leave flat triangles and chords along the outline.
+    clockwise = np.dot(x, np.roll(z, -1)) - np.dot(z, np.roll(x, -1)) < 0
+    inward = np.stack([-edges[:, 1], edges[:, 0]], axis=1) * (-1.0 if clockwise else 1.0)
+    inward /= np.linalg.norm(inward, axis=1, keepdims=True)
+    boundary, edge_of, on_seam, nudge = [], [], [], []
     for k, edge in enumerate(edges):
-        steps = max(1, round(np.linalg.norm(edge) / spacing))
+        # an opening keeps at least one point of its own, or front and back would close it
+        steps = max(2 if pattern.opening[k] else 1, round(np.linalg.norm(edge) / spacing))
         t = np.arange(steps) / steps
         boundary.append(outline[k] + t[:, None] * edge)
-        # an edge's first point is a corner: on a seam if either edge at it is one
+        nudge.append(np.where(t[:, None] > 0, 0.02 * spacing * inward[k], 0.0))
+        edge_of.append(np.full(steps, k))
         seam = np.full(steps, not pattern.opening[k])
-        seam[0] = not (pattern.opening[k] and pattern.opening[k - 1])
+        seam[0] = not (pattern.opening[k] and pattern.opening[k - 1])  # a corner
         on_seam.append(seam)
-    boundary, on_seam = np.concatenate(boundary), np.concatenate(on_seam)
+    boundary, edge_of, on_seam, nudge = map(np.concatenate, (boundary, edge_of, on_seam, nudge))
     low, high = outline.min(axis=0), outline.max(axis=0)
     gx, gz = np.meshgrid(np.arange(low[0] + spacing / 2, high[0], spacing),
                          np.arange(low[1] + spacing / 2, high[1], spacing))
@@ -218,12 +246,72 @@ def triangulate_pattern(pattern: Pattern, vertices: int, jitter: float = 0.0,
         inner += np.random.default_rng(seed).uniform(-jitter, jitter, inner.shape) * spacing
     polygon = PolygonPath(outline)
     inner = inner[polygon.contains_points(inner)]
-    near = _distance_to_segments(inner, outline, edges) < 0.5 * spacing
-    points = np.concatenate([boundary, inner[~near]])
-    triangles = Delaunay(points).simplices
-    centroids = points[triangles].mean(axis=1)
-    triangles = triangles[polygon.contains_points(centroids)]
-    return points, triangles, np.concatenate([on_seam, np.zeros(int((~near).sum()), bool)])
+    inner = inner[_distance_to_segments(inner, outline, edges) >= 0.5 * spacing]
+    count = len(boundary)
+
+    def along_outline(a, b):
+        return (a < count) & (b < count) & ((np.abs(b - a) == 1) | (np.abs(b - a) == count - 1))
+
+    nudged = PolygonPath(boundary + nudge)
+    for _ in range(8):
+        points = np.concatenate([boundary + nudge, inner])
+        triangles = Delaunay(points).simplices
+        # inside: the centroid and the middle of every edge not on the outline (an edge
+        # across a gap narrower than the spacing, under an arm or between the legs, is not)
+        keep = nudged.contains_points(points[triangles].mean(axis=1))
+        for i, j in ((0, 1), (1, 2), (2, 0)):
+            a, b = triangles[:, i], triangles[:, j]
+            middle = nudged.contains_points(0.5 * (points[a] + points[b]))
+            keep &= middle | along_outline(a, b)
+        triangles = triangles[keep]
+        pairs = np.unique(np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]],
+                                                  triangles[:, [2, 0]]]), axis=1), axis=0)
+        a, b = pairs[:, 0], pairs[:, 1]
+        seam_pair = (b < count) & on_seam[np.minimum(a, count - 1)] & \
+            on_seam[np.minimum(b, count - 1)]
+        chords = pairs[seam_pair & ~along_outline(a, b)]
+        if not len(chords):
+            break
+        inner = np.concatenate([inner, points[chords].mean(axis=1)])
+    else:
+        raise ValueError("could not triangulate the garment pattern without chords between "
+                         "seams (is it narrower than the vertex spacing somewhere?)")
+    _check_filled(triangles, count)
+    points[:count] = boundary
+    return PatternMesh(points, triangles, np.concatenate([edge_of, np.full(len(inner), -1)]),
+                       np.concatenate([on_seam, np.zeros(len(inner), bool)]))
+
+
+def _check_filled(triangles: np.ndarray, count: int) -> None:
+    """Every outline edge (between consecutive points of the first ``count``) lies on
+    one triangle and every other edge on two: the pattern is filled without holes."""
+    pairs = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]],
+                                    triangles[:, [2, 0]]]), axis=1)
+    pairs, uses = np.unique(pairs, axis=0, return_counts=True)
+    a, b = pairs[:, 0], pairs[:, 1]
+    outline = (b < count) & ((b - a == 1) | (b - a == count - 1))
+    if outline.sum() != count or (uses[outline] != 1).any() or (uses[~outline] != 2).any():
+        raise ValueError("the garment pattern could not be filled without holes (is it "
+                         "narrower than the vertex spacing somewhere? ask for more vertices)")
+
+
+def _crosses_itself(outline: np.ndarray) -> bool:
+    """Whether two non-adjacent edges of the closed polygon intersect."""
+    count = len(outline)
+    start, end = outline, np.roll(outline, -1, axis=0)
+
+    def side(p, q, r):
+        return np.sign((q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1])
+                       - (q[..., 1] - p[..., 1]) * (r[..., 0] - p[..., 0]))
+
+    for i in range(count):
+        for j in range(i + 2, count):
+            if i == 0 and j == count - 1:
+                continue
+            if (side(start[i], end[i], start[j]) * side(start[i], end[i], end[j]) < 0
+                    and side(start[j], end[j], start[i]) * side(start[j], end[j], end[i]) < 0):
+                return True
+    return False
 
 
 def _distance_to_segments(points: np.ndarray, starts: np.ndarray, edges: np.ndarray
@@ -235,7 +323,7 @@ def _distance_to_segments(points: np.ndarray, starts: np.ndarray, edges: np.ndar
 
 
 def sew_panels(points: np.ndarray, triangles: np.ndarray, on_seam: np.ndarray
-               ) -> tuple[np.ndarray, np.ndarray]:
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One surface from a front and a back copy of a triangulated pattern: the back
     shares the front's seam vertices. Returns each point's front and back vertex
     index and the faces (the back's wound the other way, so both face outwards once
@@ -257,11 +345,11 @@ def sew_panels(points: np.ndarray, triangles: np.ndarray, on_seam: np.ndarray
 
 # ------------------------------------------------------------------ lifting
 
-def _depth_maps(body_xyz: np.ndarray) -> tuple[callable, callable]:
+def _depth_maps(body_xyz: np.ndarray) -> tuple[Callable, Callable]:
     """Smooth front (min y) and back (max y) depth of the body points over (x, z),
     filled outside the body from its nearest part."""
     from scipy.interpolate import RegularGridInterpolator
-    from scipy.ndimage import gaussian_filter
+    from scipy.ndimage import gaussian_filter, maximum_filter, minimum_filter
     from scipy.spatial import cKDTree
 
     low = body_xyz[:, [0, 2]].min(axis=0) - 0.3
@@ -280,8 +368,6 @@ def _depth_maps(body_xyz: np.ndarray) -> tuple[callable, callable]:
         grid[~filled] = grid[nearest[:, 0], nearest[:, 1]]
     axes = tuple(low[k] + _DEPTH_BIN * np.arange(shape[k]) for k in range(2))
     # widen by the bins a vertex covers, then smooth: the cloth does not dip into gaps
-    from scipy.ndimage import maximum_filter, minimum_filter
-
     front = gaussian_filter(minimum_filter(front, size=5), 2.0)
     back = gaussian_filter(maximum_filter(back, size=5), 2.0)
     return (RegularGridInterpolator(axes, front, bounds_error=False, fill_value=None),
@@ -312,15 +398,21 @@ def lift_panels(points: np.ndarray, front_index: np.ndarray, back_index: np.ndar
 
 
 def push_out(mesh: Mesh, body_vertices: np.ndarray, body_faces: np.ndarray,
-             clearance: float) -> Mesh:
+             clearance: float, passes: int = 4) -> Mesh:
     """``mesh`` with every vertex nearer the body than ``clearance`` (or inside it)
-    moved out along the body's outward normal to ``clearance``."""
+    moved out along the body's outward normal to ``clearance``; again, up to
+    ``passes`` times, where a move brought a vertex near another part (a crease)."""
     from swingar_pyg.collision.reference import BodySurface
 
     surface = BodySurface(body_vertices, body_faces)
-    depth, normal = surface.signed_distance(mesh.vertices)  # positive inside
-    move = np.maximum(depth + clearance, 0.0)
-    return as_mesh(mesh.vertices + move[:, None] * normal, mesh.faces)
+    vertices = mesh.vertices.copy()
+    for _ in range(passes):
+        depth, normal = surface.signed_distance(vertices)  # positive inside
+        move = np.maximum(depth + clearance, 0.0)
+        if not move.any():
+            break
+        vertices += (move + 1e-3 * clearance * (move > 0))[:, None] * normal
+    return as_mesh(vertices, mesh.faces)
 
 
 # ------------------------------------------------------------------ fitting
@@ -361,13 +453,21 @@ def fit_sewn_garment(spec: TShirtSpec | JumpsuitSpec, body: "BodyModel", shape) 
     else:
         pattern = jumpsuit_pattern(spec, joints, half_width(joints["Spine1"][1] - 0.02),
                                    half_width(hips - 0.05))
-    points, triangles, on_seam = triangulate_pattern(pattern, spec.vertices, spec.jitter,
-                                                     spec.seed)
-    front_index, back_index, sewn = sew_panels(points, triangles, on_seam)
-    mesh = lift_panels(points, front_index, back_index, sewn, pattern, kept, spec.clearance)
-    mesh = _facing_out(mesh)
-    mesh = push_out(mesh, rest, faces, spec.clearance)
-    return garment_on_body(spec.name, mesh, body, shape)
+    cut = triangulate_pattern(pattern, spec.vertices, spec.jitter, spec.seed)
+    front_index, back_index, sewn = sew_panels(cut.points, cut.triangles, cut.on_seam)
+    mesh = lift_panels(cut.points, front_index, back_index, sewn, pattern, kept,
+                       spec.clearance)
+    mesh = push_out(_facing_out(mesh), rest, faces, spec.clearance)
+    # pinned: the highest openings (the neckline, both halves of the chest line) with
+    # their end corners, on both panels
+    openings = np.flatnonzero(pattern.opening)
+    height = 0.5 * (pattern.outline[openings, 1] +
+                    np.roll(pattern.outline, -1, axis=0)[openings, 1])
+    top = openings[height > height.max() - 0.01]
+    ends = [np.flatnonzero(cut.edge == (k + 1) % len(pattern.outline))[0] for k in top]
+    on_top = np.concatenate([np.flatnonzero(np.isin(cut.edge, top)), ends])
+    pinned = np.unique(np.concatenate([front_index[on_top], back_index[on_top]]))
+    return garment_on_body(spec.name, mesh, body, shape, pinned=pinned[pinned >= 0])
 
 
 def _facing_out(mesh: Mesh) -> Mesh:
