@@ -23,6 +23,7 @@ import torch
 from torch import Tensor
 
 from swingar_pyg.geometry.bones import bone_segments, distance_to_bones
+from swingar_pyg.world.body import rest_pose
 
 
 @dataclass(frozen=True)
@@ -51,8 +52,7 @@ class BoneCapsules:
     @classmethod
     def from_body(cls, body, shape: Tensor) -> "BoneCapsules":
         """The capsules of a :class:`~swingar_pyg.world.body.BodyModel` with ``shape``."""
-        joints = len(body.joint_names)
-        rest = body.pose(shape, torch.eye(3).expand(1, joints, 3, 3), torch.zeros(1, 3))
+        rest = rest_pose(body, shape)
         indices, weights = body.skinning()
         return cls.fit(rest.vertices[0], indices, weights, rest.joint_positions[0], body.parents)
 

@@ -63,14 +63,19 @@ def stretch_pairs(mesh: Mesh) -> np.ndarray:
     return mesh_edges(mesh.faces)
 
 
-def bending_pairs(mesh: Mesh) -> np.ndarray:
-    """For every edge shared by two triangles, their two opposite vertices."""
-    faces = mesh.faces
+def _corners_by_edge(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Every triangle corner as ``(a, b, opposite)`` of its edge ``a -> b`` in the
+    triangle's winding, and the edge ``(min, max)``, both sorted by edge."""
     corners = np.concatenate([faces[:, [0, 1, 2]], faces[:, [1, 2, 0]], faces[:, [2, 0, 1]]])
     edge = np.sort(corners[:, :2], axis=1)
-    opposite = corners[:, 2]
     order = np.lexsort((edge[:, 1], edge[:, 0]))
-    edge, opposite = edge[order], opposite[order]
+    return corners[order], edge[order]
+
+
+def bending_pairs(mesh: Mesh) -> np.ndarray:
+    """For every edge shared by two triangles, their two opposite vertices."""
+    corners, edge = _corners_by_edge(mesh.faces)
+    opposite = corners[:, 2]
     same = np.all(edge[1:] == edge[:-1], axis=1)
     pairs = np.stack([opposite[:-1][same], opposite[1:][same]], axis=1)
     pairs = np.sort(pairs[pairs[:, 0] != pairs[:, 1]], axis=1)
@@ -81,11 +86,7 @@ def hinges(mesh: Mesh) -> np.ndarray:
     """``(H, 4)`` hinges ``(x1, x2, x3, x4)`` of the interior edges ``x3 -> x4`` shared
     by exactly two triangles: ``x1`` opposite the edge in the triangle that runs
     ``x3 -> x4``, ``x2`` in the other (edges of three or more triangles are left out)."""
-    faces = mesh.faces
-    corners = np.concatenate([faces[:, [0, 1, 2]], faces[:, [1, 2, 0]], faces[:, [2, 0, 1]]])
-    edge = np.sort(corners[:, :2], axis=1)
-    order = np.lexsort((edge[:, 1], edge[:, 0]))
-    corners, edge = corners[order], edge[order]
+    corners, edge = _corners_by_edge(mesh.faces)
     first = np.concatenate([[True], np.any(edge[1:] != edge[:-1], axis=1)])
     group = np.cumsum(first) - 1
     size = np.bincount(group)

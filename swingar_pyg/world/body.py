@@ -46,6 +46,13 @@ def check_pose(rotations: Tensor, translation: Tensor, joints: int) -> None:
         raise ValueError("rotations and translation must be finite")
 
 
+def rest_pose(body: "BodyModel", shape: Tensor) -> PosedBody:
+    """``body`` with ``shape`` in its rest pose (identity rotations, root at the
+    origin): one frame."""
+    joints = len(body.joint_names)
+    return body.pose(shape, torch.eye(3).expand(1, joints, 3, 3), torch.zeros(1, 3))
+
+
 class BodyModel(Protocol):
     """What the rest of the package needs from a body model."""
 
@@ -113,8 +120,7 @@ class AnnyBody:
         return shape
 
     def rest_vertices(self, shape: Tensor) -> Tensor:
-        rotations = torch.eye(3).expand(1, len(self.joint_names), 3, 3)
-        return self.pose(shape, rotations, torch.zeros(1, 3)).vertices[0]
+        return rest_pose(self, shape).vertices[0]
 
     def pose(self, shape: Tensor, rotations: Tensor, translation: Tensor) -> PosedBody:
         shape = self._check_shape(shape)

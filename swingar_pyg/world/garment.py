@@ -22,11 +22,26 @@ if TYPE_CHECKING:
 
 # Bones whose vertices do not bound a skirt: in the rest A-pose the hands hang beside
 # the hips, but a skirt goes around the pelvis and legs, not around the arms.
-_ARM_BONE_WORDS = ("Shoulder", "Arm", "Hand", "Thumb", "Finger")
+ARM_BONE_WORDS = ("Shoulder", "Arm", "Hand", "Thumb", "Finger")
 # Pins (waistband, neckline) ride on the torso: they follow its joints only, or the
 # thighs would drag a waistband out of shape in a stride (measured: 37 % strain running).
-_LIMB_WORDS = ("Leg", "Foot", "Toe", "HipJoint") + _ARM_BONE_WORDS
+_LIMB_WORDS = ("Leg", "Foot", "Toe", "HipJoint") + ARM_BONE_WORDS
 _ENVELOPE_BINS = 72
+
+
+def topology_tag(jitter: float) -> str:
+    """``"irregular"`` for a jittered triangulation, ``"grid"`` for a regular one."""
+    return "irregular" if jitter > 0 else "grid"
+
+
+def dominant_joints(skin_indices: np.ndarray, skin_weights: np.ndarray) -> np.ndarray:
+    """Each vertex's most weighted joint."""
+    return skin_indices[np.arange(len(skin_indices)), np.argmax(skin_weights, axis=1)]
+
+
+def joints_named(joint_names: tuple[str, ...], words: tuple[str, ...]) -> list[int]:
+    """The joints whose name contains any of ``words``."""
+    return [j for j, name in enumerate(joint_names) if any(w in name for w in words)]
 
 
 @dataclass(frozen=True)
@@ -87,8 +102,8 @@ class SkirtSpec:
 
     @property
     def name(self) -> str:
-        kind = "irregular" if self.jitter > 0 else "grid"
-        return f"{self.family}-l{self.length:.2f}-f{self.flare:.2f}-n{self.vertices}-{kind}"
+        return (f"{self.family}-l{self.length:.2f}-f{self.flare:.2f}-n{self.vertices}-"
+                f"{topology_tag(self.jitter)}")
 
     @property
     def family(self) -> str:
@@ -197,9 +212,8 @@ def procedural_skirt(spec: SkirtSpec, body_vertices: np.ndarray, body_faces: np.
     is the larger of the flared profile and the body's envelope plus clearance.
     """
     body_vertices = np.asarray(body_vertices, dtype=np.float64)
-    dominant = skin_indices[np.arange(len(skin_indices)), np.argmax(skin_weights, axis=1)]
-    arm_joints = [j for j, n in enumerate(joint_names) if any(w in n for w in _ARM_BONE_WORDS)]
-    keep = ~np.isin(dominant, arm_joints)
+    keep = ~np.isin(dominant_joints(skin_indices, skin_weights),
+                    joints_named(joint_names, ARM_BONE_WORDS))
 
     circumference_guess = 2 * math.pi * 0.2
     segments = max(8, round(math.sqrt(spec.vertices * circumference_guess / spec.length)))
@@ -265,7 +279,7 @@ def transfer_skinning(vertices: np.ndarray, pinned: np.ndarray, body_vertices: n
     vertices keep only the torso's joints (renormalised; the root if none)."""
     nearest = cKDTree(body_vertices).query(vertices)[1]
     indices, weights = skin_indices[nearest].copy(), skin_weights[nearest].astype(np.float64)
-    torso = [j for j, n in enumerate(joint_names) if not any(w in n for w in _LIMB_WORDS)]
+    torso = sorted(set(range(len(joint_names))) - set(joints_named(joint_names, _LIMB_WORDS)))
     kept = np.where(np.isin(indices[pinned], torso), weights[pinned], 0.0)
     total = kept.sum(axis=1, keepdims=True)
     root = np.zeros_like(kept)

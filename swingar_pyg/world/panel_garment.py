@@ -28,15 +28,19 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from swingar_pyg.geometry.mesh import Mesh, as_mesh
-
-if TYPE_CHECKING:
-    from swingar_pyg.world.body import BodyModel
-    from swingar_pyg.world.garment import Garment
+from swingar_pyg.world.body import BodyModel, rest_pose
+from swingar_pyg.world.garment import (
+    ARM_BONE_WORDS,
+    Garment,
+    dominant_joints,
+    garment_on_body,
+    joints_named,
+    topology_tag,
+)
 
 _TAPER_RADIUS = 0.06
 _DEPTH_BIN = 0.01
@@ -80,8 +84,8 @@ class TShirtSpec:
 
     @property
     def name(self) -> str:
-        kind = "irregular" if self.jitter > 0 else "grid"
-        return f"tshirt-l{self.length:.2f}-s{self.sleeve:.2f}-n{self.vertices}-{kind}"
+        return (f"tshirt-l{self.length:.2f}-s{self.sleeve:.2f}-n{self.vertices}-"
+                f"{topology_tag(self.jitter)}")
 
 
 @dataclass(frozen=True)
@@ -107,8 +111,7 @@ class JumpsuitSpec:
 
     @property
     def name(self) -> str:
-        kind = "irregular" if self.jitter > 0 else "grid"
-        return f"jumpsuit-g{self.leg:.2f}-n{self.vertices}-{kind}"
+        return f"jumpsuit-g{self.leg:.2f}-n{self.vertices}-{topology_tag(self.jitter)}"
 
 
 def _check(spec, **ranges: tuple[float, float]) -> None:
@@ -417,30 +420,23 @@ def push_out(mesh: Mesh, body_vertices: np.ndarray, body_faces: np.ndarray,
 
 # ------------------------------------------------------------------ fitting
 
-_ARM_AND_HEAD = ("ForeArm", "Hand", "Thumb", "Finger", "Neck1", "Head")
-_ARMS_AND_HEAD = ("Shoulder", "Arm", "Hand", "Thumb", "Finger", "Neck", "Head")
+# the body parts a garment's depth ignores: a t-shirt's covers the upper arms
+_FOREARMS_AND_HEAD = ("ForeArm", "Hand", "Thumb", "Finger", "Neck1", "Head")
 
 
-def fit_sewn_garment(spec: TShirtSpec | JumpsuitSpec, body: "BodyModel", shape) -> "Garment":
+def fit_sewn_garment(spec: TShirtSpec | JumpsuitSpec, body: BodyModel, shape) -> Garment:
     """A t-shirt or jumpsuit cut for ``body`` with ``shape`` and dressed on its rest pose."""
-    import torch
-
-    from swingar_pyg.world.garment import garment_on_body
-
-    rest = body.rest_vertices(shape).numpy().astype(np.float64)
+    posed = rest_pose(body, shape)
+    rest = posed.vertices[0].numpy().astype(np.float64)
     faces = body.faces.numpy()
-    count = len(body.joint_names)
-    posed = body.pose(shape, torch.eye(3).expand(1, count, 3, 3), torch.zeros(1, 3))
     joints = {name: position[[0, 2]].numpy().astype(np.float64)
               for name, position in zip(body.joint_names, posed.joint_positions[0])}
     indices, weights = body.skinning()
-    dominant = indices.numpy()[np.arange(len(rest)), weights.numpy().argmax(axis=1)]
-    words = _ARM_AND_HEAD if isinstance(spec, TShirtSpec) else _ARMS_AND_HEAD
-    left_out = [j for j, name in enumerate(body.joint_names) if any(w in name for w in words)]
-    kept = rest[~np.isin(dominant, left_out)]
-    no_arms = [j for j, name in enumerate(body.joint_names)
-               if any(w in name for w in _ARMS_AND_HEAD)]
-    torso = rest[~np.isin(dominant, no_arms)]
+    dominant = dominant_joints(indices.numpy(), weights.numpy())
+    arms_and_head = ARM_BONE_WORDS + ("Neck", "Head")
+    words = _FOREARMS_AND_HEAD if isinstance(spec, TShirtSpec) else arms_and_head
+    kept = rest[~np.isin(dominant, joints_named(body.joint_names, words))]
+    torso = rest[~np.isin(dominant, joints_named(body.joint_names, arms_and_head))]
 
     def half_width(z: float) -> float:
         band = torso[np.abs(torso[:, 2] - z) < 0.03]

@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from swingar_pyg.world.body import BodyModel
+from swingar_pyg.world.body import BodyModel, rest_pose
 from swingar_pyg.world.bvh import BVHClip
 from swingar_pyg.world.motion import Motion, joint_side
 
@@ -74,8 +74,7 @@ def retarget(clip: BVHClip, body: BodyModel, shape: torch.Tensor, fps: float = 3
     frames = clip.num_frames
     parents = list(body.parents)
     joints = len(body_names)
-    rest = body.pose(shape, torch.eye(3).expand(1, joints, 3, 3), torch.zeros(1, 3))
-    rest_heads = rest.joint_positions[0].double().numpy()
+    rest_heads = rest_pose(body, shape).joint_positions[0].double().numpy()
     children = {j: [c for c in range(joints) if parents[c] == j] for j in range(joints)}
 
     align = np.tile(np.eye(3), (joints, 1, 1))

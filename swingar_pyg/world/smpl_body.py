@@ -19,7 +19,7 @@ from pathlib import Path
 import torch
 from torch import Tensor
 
-from swingar_pyg.world.body import PosedBody, check_pose
+from swingar_pyg.world.body import PosedBody, check_pose, rest_pose
 
 SMPL_JOINTS = ("pelvis", "left_hip", "right_hip", "spine1", "left_knee", "right_knee", "spine2",
                "left_ankle", "right_ankle", "spine3", "left_foot", "right_foot", "neck",
@@ -87,8 +87,7 @@ class SMPLBody:
         return shape
 
     def rest_vertices(self, shape: Tensor) -> Tensor:
-        joints = len(self.joint_names)
-        return self.pose(shape, torch.eye(3).expand(1, joints, 3, 3), torch.zeros(1, 3)).vertices[0]
+        return rest_pose(self, shape).vertices[0]
 
     def pose(self, shape: Tensor, rotations: Tensor, translation: Tensor) -> PosedBody:
         from smplx.lbs import batch_rigid_transform, blend_shapes, lbs, vertices2joints
