@@ -174,8 +174,9 @@ def build_parser() -> argparse.ArgumentParser:
                           help="xpbd (the datasets') or vbd (newton's, pip install "
                                "'swingar-pyg[newton]')")
     simulate.add_argument("--bending", choices=("distance", "dihedral"), default=None,
-                          help="XPBD bending model (default: distance, the datasets'; "
-                               "dihedral: hinge angles at VBD's stiffness)")
+                          help="XPBD bending model (default: dihedral, the datasets': hinge "
+                               "angles at VBD's stiffness; distance: simulator revision 3's "
+                               "opposite-corner constraints)")
     simulate.add_argument("--substeps", type=int, default=None,
                           help="per frame (default: the solver's, XPBD 50, VBD 10)")
     simulate.add_argument("--iterations", type=int, default=None,

@@ -1,6 +1,7 @@
 r"""Constraints of a cloth mesh: distances (stretch edges, or the opposite corners of
 adjacent triangles as a simple bending model), grouped into colours for parallel
-Gauss–Seidel, and dihedral angles across interior edges (hinges), solved together.
+Gauss–Seidel, dihedral angles across interior edges (hinges), solved together, and
+tethers from free vertices to their nearest pin.
 
 A hinge ``(x1, x2, x3, x4)`` has the shared edge :math:`\mathbf{e} = \mathbf{x}_4 -
 \mathbf{x}_3` and the triangles :math:`(\mathbf{x}_1, \mathbf{x}_3, \mathbf{x}_4)`,
@@ -35,6 +36,9 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from scipy.sparse.csgraph import dijkstra
+
+from swingar_pyg.geometry.geodesic import edge_length_graph
 from swingar_pyg.geometry.mesh import Mesh, mesh_edges
 
 
@@ -189,3 +193,47 @@ def dihedral_constraints(mesh: Mesh) -> DihedralConstraints:
     share = 1.0 / np.maximum(count, 1)
     return DihedralConstraints(torch.from_numpy(rows), angle, torch.from_numpy(lengths),
                                torch.from_numpy(share)[:, None])
+
+
+@dataclass(frozen=True)
+class TetherConstraints:
+    r"""Long-range attachments (Kim et al. 2012): each free vertex :math:`i` that
+    a path of mesh edges joins to a pin is kept within its rest geodesic distance
+    :math:`g_i` of its nearest pin :math:`a_i`,
+
+    .. math::
+        C_i = \|\mathbf{x}_i - \mathbf{x}_{a_i}\| - (1 + s)\, g_i \le 0,
+
+    with slack :math:`s`. The bound is unilateral (slack cloth is free) and the
+    pin does not move, so one projection satisfies it: stretch cannot accumulate
+    along the cloth when there are too few sweeps to carry the pins' pull to the
+    far edge.
+
+    Attributes:
+        vertices: ``(T,)`` tethered vertices (each once).
+        anchors: ``(T,)`` their nearest pins.
+        rest_lengths: ``(T,)`` rest geodesic distances along mesh edges.
+    """
+
+    vertices: Tensor
+    anchors: Tensor
+    rest_lengths: Tensor
+
+    def to(self, device: torch.device | str, dtype: torch.dtype) -> "TetherConstraints":
+        return TetherConstraints(self.vertices.to(device), self.anchors.to(device),
+                                 self.rest_lengths.to(device, dtype))
+
+
+def tether_constraints(mesh: Mesh, pinned: np.ndarray) -> TetherConstraints:
+    """Tethers of every free vertex that shares a connected piece with a pin
+    (none if nothing is pinned); geodesics cross welded seams."""
+    pinned = np.unique(np.asarray(pinned, dtype=np.int64))
+    free = np.setdiff1d(np.arange(mesh.num_vertices), pinned)
+    if pinned.size == 0 or free.size == 0:
+        empty = torch.zeros(0, dtype=torch.long)
+        return TetherConstraints(empty, empty, torch.zeros(0, dtype=torch.float64))
+    distance, _, nearest = dijkstra(edge_length_graph(mesh), indices=pinned, min_only=True,
+                                    return_predecessors=True)
+    free = free[np.isfinite(distance[free])]
+    return TetherConstraints(torch.from_numpy(free), torch.from_numpy(nearest[free]),
+                             torch.from_numpy(distance[free]))

@@ -11,13 +11,18 @@ compliance :math:`\alpha` (m/N; 0 is inextensible) is solved by
 
 with inverse masses :math:`w` (0 for pinned vertices; a constraint with
 :math:`w_i + w_j + \tilde\alpha = 0` is skipped rather than dividing 0 by 0).
-Stretch constraints are the mesh edges. Bending is either distance constraints
-between the opposite vertices of adjacent triangles (``bending="distance"``, the
-datasets' model: it also resists in-plane compression) or the hinges' dihedral
-angles (``bending="dihedral"``: :math:`C = \theta - \theta_0` wrapped to
+Stretch constraints are the mesh edges. Bending is either the hinges' dihedral
+angles (``bending="dihedral"``, the default and the datasets' model since
+simulator revision 4: :math:`C = \theta - \theta_0` wrapped to
 :math:`(-\pi, \pi]`, energy :math:`\tfrac12 k \|\mathbf{e}_0\| C^2` with
 ``bend_stiffness`` :math:`k`, as newton's VBD cloth, so the two simulators
-compare like for like; compliance :math:`1 / (k \|\mathbf{e}_0\|)`).
+compare like for like; compliance :math:`1 / (k \|\mathbf{e}_0\|)`) or distance constraints between the
+opposite vertices of adjacent triangles (``bending="distance"``, revision 3's model:
+it also resists the in-plane compression that folding needs, so flares fall less).
+Each iteration then projects the tethers (:class:`~swingar_pyg.sim.constraints.
+TetherConstraints`): no free vertex ends farther from its nearest pin than its rest
+geodesic distance plus ``tether_slack``, which bounds stretch when few sweeps
+cannot carry the pins' pull across the cloth (large time steps, fast bodies).
 Distance constraints are coloured so that each colour is a parallel Gauss–Seidel
 sweep. Hinges are solved in one Jacobi sweep, each vertex's corrections averaged
 over its hinges (Macklin et al. 2014): a hinge has four vertices, so colouring
@@ -40,11 +45,13 @@ from swingar_pyg.sim.collider import BodyCollider
 from swingar_pyg.sim.constraints import (
     DihedralConstraints,
     DistanceConstraints,
+    TetherConstraints,
     bending_pairs,
     dihedral_angles,
     dihedral_constraints,
     distance_constraints,
     stretch_pairs,
+    tether_constraints,
 )
 from swingar_pyg.sim.recording import (
     FrameRecorder,
@@ -55,7 +62,7 @@ from swingar_pyg.sim.recording import (
 
 # Raise whenever a change alters simulated positions: dataset files record it, and the
 # datamodule warns when it trains on sequences an older simulator made.
-SIMULATOR_REVISION = 3
+SIMULATOR_REVISION = 4
 
 
 @dataclass(frozen=True)
@@ -67,11 +74,14 @@ class XPBDSettings:
         substeps: solver steps per frame.
         iterations: constraint sweeps per substep.
         stretch_compliance: m/N; 0 is inextensible.
-        bending: ``"distance"`` (opposite corners of adjacent triangles, compliance
-            ``bend_compliance``) or ``"dihedral"`` (hinge angles, ``bend_stiffness``).
+        bending: ``"dihedral"`` (hinge angles, ``bend_stiffness``) or ``"distance"``
+            (opposite corners of adjacent triangles, compliance ``bend_compliance``).
         bend_compliance: m/N, distance bending; larger bends more easily.
         bend_stiffness: N m per radian² per metre of edge, dihedral bending (newton's
             VBD ``edge_ke``).
+        tethers: keep each free vertex within its rest geodesic distance of its
+            nearest pin (long-range attachments).
+        tether_slack: how much farther than that it may go, as a fraction.
         density: cloth mass per area, kg/m².
         damping: velocity decay rate, 1/s.
         friction: Coulomb coefficient: tangential slip against the body is removed up
@@ -87,9 +97,11 @@ class XPBDSettings:
     substeps: int = 50
     iterations: int = 2
     stretch_compliance: float = 0.0
-    bending: str = "distance"
+    bending: str = "dihedral"
     bend_compliance: float = 1e-4
     bend_stiffness: float = 1e-3
+    tethers: bool = True
+    tether_slack: float = 0.02
     density: float = 0.15
     damping: float = 1.0
     friction: float = 0.3
@@ -106,8 +118,8 @@ class XPBDSettings:
                              f"{self.contacts_per_frame}")
         if self.bending not in ("distance", "dihedral"):
             raise ValueError(f"bending must be 'distance' or 'dihedral', got {self.bending!r}")
-        for name in ("stretch_compliance", "bend_compliance", "bend_stiffness", "density",
-                     "damping", "thickness", "settle_frames"):
+        for name in ("stretch_compliance", "bend_compliance", "bend_stiffness", "tether_slack",
+                     "density", "damping", "thickness", "settle_frames"):
             value = getattr(self, name)
             if not np.isfinite(value) or value < 0:
                 raise ValueError(f"{name} must be finite and >= 0, got {value}")
@@ -158,6 +170,15 @@ class XPBDCloth:
         inverse_mass = 1.0 / vertex_masses(mesh, settings.density)
         inverse_mass[pinned] = 0.0
         self.inverse_mass = inverse_mass.to(self.device, dtype)
+        self.tethers = (tether_constraints(mesh, pinned).to(self.device, dtype)
+                        if settings.tethers else None)
+        if settings.bending == "dihedral":
+            # Per hinge, fixed for the run: the corners' inverse masses and the XPBD
+            # compliance 1 / (k |e0| dt^2) (infinite, i.e. no bending, for k = 0).
+            dt = 1.0 / (settings.fps * settings.substeps)
+            self.hinge_weights = self.inverse_mass[self.bend.hinges]
+            stiffness_dt2 = settings.bend_stiffness * self.bend.rest_lengths * dt * dt
+            self.hinge_compliance = 1.0 / stiffness_dt2.clamp_min(torch.finfo(dtype).tiny)
         self.gravity = torch.tensor(settings.gravity, device=self.device, dtype=dtype)
 
     def _solve(self, p: Tensor, constraints: DistanceConstraints, compliance: float,
@@ -178,19 +199,16 @@ class XPBDCloth:
             p.index_add_(0, i, (w[i] * step).unsqueeze(-1) * normal)
             p.index_add_(0, j, -(w[j] * step).unsqueeze(-1) * normal)
 
-    def _solve_hinges(self, p: Tensor, constraints: DihedralConstraints, dt: float,
+    def _solve_hinges(self, p: Tensor, constraints: DihedralConstraints,
                       lagrange: Tensor) -> None:
         """One Jacobi sweep over every hinge: each hinge's XPBD step from the same
         positions, a vertex's corrections averaged over its hinges."""
-        stiffness = self.settings.bend_stiffness
-        if stiffness == 0:
+        if self.settings.bend_stiffness == 0:
             return
         rows = constraints.hinges
         angle, gradients, valid = dihedral_angles(*p[rows].unbind(1))
         gradient = torch.stack(gradients, 1)
-        weights = self.inverse_mass[rows]
-        stiffness_dt2 = stiffness * constraints.rest_lengths * dt * dt
-        alpha = 1.0 / stiffness_dt2.clamp_min(torch.finfo(p.dtype).tiny)
+        weights, alpha = self.hinge_weights, self.hinge_compliance
         difference = angle - constraints.rest_angles
         violation = torch.atan2(torch.sin(difference), torch.cos(difference))
         denominator = alpha + (weights * gradient.square().sum(-1)).sum(-1)
@@ -201,6 +219,15 @@ class XPBDCloth:
         correction = ((weights * step.unsqueeze(-1)).unsqueeze(-1) * gradient).reshape(-1, 3)
         p.add_(torch.zeros_like(p).index_add_(0, rows.reshape(-1), correction) *
                constraints.share)
+
+    def _tether(self, p: Tensor, tethers: TetherConstraints) -> None:
+        """Moves each over-long tether's free end back onto its sphere around the pin."""
+        delta = p[tethers.vertices] - p[tethers.anchors]
+        length = delta.norm(dim=-1)
+        excess = (length - (1.0 + self.settings.tether_slack) * tethers.rest_lengths
+                  ).clamp_min(0.0)
+        p.index_add_(0, tethers.vertices,
+                     -(excess / length.clamp_min(1e-12)).unsqueeze(-1) * delta)
 
     def _collide(self, p: Tensor, x: Tensor, collider: BodyCollider, frame: int,
                  contact: Tensor, fraction: float, body_step: Tensor) -> None:
@@ -277,7 +304,9 @@ class XPBDCloth:
                     if s.bending == "distance":
                         self._solve(p, self.bend, s.bend_compliance, dt, bend_lagrange)
                     else:
-                        self._solve_hinges(p, self.bend, dt, bend_lagrange)
+                        self._solve_hinges(p, self.bend, bend_lagrange)
+                    if self.tethers is not None:
+                        self._tether(p, self.tethers)
                     if collider is not None:
                         body_fraction = 1.0 if settling else fraction
                         self._collide(p, x, collider, frame, contact, body_fraction, body_step)

@@ -15,14 +15,28 @@ from lightning.pytorch.callbacks import ModelCheckpoint
 from lightning.pytorch.cli import LightningArgumentParser, LightningCLI
 
 
+class LastStepCheckpoint(ModelCheckpoint):
+    """A :class:`ModelCheckpoint` whose ``last.ckpt`` always holds the final step.
+
+    Lightning writes ``last`` with each validation (or epoch end) and, when training
+    ends, only if it never wrote one: a run that ``max_steps`` stopped between two
+    validations ended with a ``last.ckpt`` some steps short, and resuming it redid
+    them. This writes it once more at the end when the final step is not saved yet."""
+
+    def on_train_end(self, trainer: L.Trainer, pl_module: L.LightningModule) -> None:
+        if self.save_last and not self._should_skip_saving_checkpoint(trainer):
+            self._save_last_checkpoint(trainer, self._monitor_candidates(trainer))
+        super().on_train_end(trainer, pl_module)
+
+
 class SwinGarCLI(LightningCLI):
-    """Adds a ``checkpoint:`` section (a :class:`ModelCheckpoint`) whose folder
+    """Adds a ``checkpoint:`` section (a :class:`LastStepCheckpoint`) whose folder
     is ``<trainer.default_root_dir>/checkpoints``, and logs to CSV under
     ``<trainer.default_root_dir>/logs`` unless the config names a logger, so a
     config that changes the run's folder (an ablation) moves everything with it."""
 
     def add_arguments_to_parser(self, parser: LightningArgumentParser) -> None:
-        parser.add_lightning_class_args(ModelCheckpoint, "checkpoint")
+        parser.add_lightning_class_args(LastStepCheckpoint, "checkpoint")
         parser.link_arguments("trainer.default_root_dir", "checkpoint.dirpath",
                               compute_fn=lambda root: f"{root}/checkpoints")
 
