@@ -129,6 +129,37 @@ def _trainer(root, steps, record, *callbacks):
                      default_root_dir=root, callbacks=[record, *callbacks])
 
 
+class _LastCheckpointStep(L.Callback):
+    """Before each training step: the step ``last.ckpt`` holds."""
+
+    def __init__(self, path):
+        self.path, self.steps = path, []
+
+    def on_train_batch_start(self, trainer, module, batch, batch_index):
+        if self.path.exists():
+            saved = torch.load(self.path, weights_only=False)['global_step']
+            self.steps.append((trainer.global_step, saved))
+
+
+def test_last_checkpoint_follows_every_validation_and_the_final_step(tiny_windows, tmp_path):
+    from swingar_pyg.training import SwinGarModule
+    from swingar_pyg.training.cli import LastStepCheckpoint
+
+    checkpoint = LastStepCheckpoint(tmp_path, 'best', monitor='val/estimator_mean_mm',
+                                    save_last=True)
+    record = _LastCheckpointStep(tmp_path / 'last.ckpt')
+    trainer = L.Trainer(max_steps=5, val_check_interval=2, limit_val_batches=1,
+                        num_sanity_val_steps=0, logger=False, enable_progress_bar=False,
+                        enable_model_summary=False, default_root_dir=tmp_path,
+                        callbacks=[record, checkpoint])
+    # lr 0: the validation error never falls again, so only step 2 is a new best
+    trainer.fit(SwinGarModule(SwinGarEstimator(**SMALL_ESTIMATOR), lr=0.0),
+                datamodule=tiny_windows)
+    assert [p.name for p in tmp_path.glob('best*.ckpt')] == ['best.ckpt']
+    assert record.steps == [(2, 2), (3, 2), (4, 4)]
+    assert torch.load(tmp_path / 'last.ckpt', weights_only=False)['global_step'] == 5
+
+
 @pytest.mark.filterwarnings('ignore:.*limit_val_batches=0.*')
 @pytest.mark.filterwarnings('ignore:Be aware that when using .ckpt_path.')
 def test_resuming_mid_epoch_continues_with_the_next_batch(tiny_windows, tmp_path):

@@ -16,16 +16,25 @@ from lightning.pytorch.cli import LightningArgumentParser, LightningCLI
 
 
 class LastStepCheckpoint(ModelCheckpoint):
-    """A :class:`ModelCheckpoint` whose ``last.ckpt`` always holds the final step.
+    """A :class:`ModelCheckpoint` whose ``last.ckpt`` always holds the latest
+    validated step and, at the end, the final step.
 
-    Lightning writes ``last`` with each validation (or epoch end) and, when training
-    ends, only if it never wrote one: a run that ``max_steps`` stopped between two
-    validations ended with a ``last.ckpt`` some steps short, and resuming it redid
-    them. This writes it once more at the end when the final step is not saved yet."""
+    Lightning 2.6 rewrites ``last`` at a validation only when that validation also
+    saved a top-k checkpoint (a new best), and at the end of training only if it never
+    wrote one: a run killed after its validation error stopped falling resumed from its
+    last best, and a finished run's ``last.ckpt`` could be steps short of ``max_steps``."""
 
-    def on_train_end(self, trainer: L.Trainer, pl_module: L.LightningModule) -> None:
+    def _catch_up_last(self, trainer: L.Trainer) -> None:
         if self.save_last and not self._should_skip_saving_checkpoint(trainer):
             self._save_last_checkpoint(trainer, self._monitor_candidates(trainer))
+
+    def on_validation_end(self, trainer: L.Trainer, pl_module: L.LightningModule) -> None:
+        super().on_validation_end(trainer, pl_module)
+        if not self._should_save_on_train_epoch_end(trainer):
+            self._catch_up_last(trainer)
+
+    def on_train_end(self, trainer: L.Trainer, pl_module: L.LightningModule) -> None:
+        self._catch_up_last(trainer)
         super().on_train_end(trainer, pl_module)
 
 
