@@ -129,6 +129,20 @@ class XPBDSettings:
             raise ValueError(f"friction must be in [0, 1], got {self.friction}")
 
 
+@dataclass(frozen=True)
+class _Colour:
+    """One colour of distance constraints, with what stays fixed for a run."""
+
+    rows: slice
+    i: Tensor
+    j: Tensor
+    rest_lengths: Tensor
+    wi: Tensor
+    wj: Tensor
+    solvable: Tensor  # w_i + w_j + alpha > 0 (else the step is 0, not 0 / 0)
+    denominator: Tensor
+
+
 def vertex_masses(mesh: Mesh, density: float) -> Tensor:
     """Lumped masses: a third of each incident triangle's area times density.
     Vertices without area get the smallest positive mass, so none is infinitely light."""
@@ -181,23 +195,35 @@ class XPBDCloth:
             self.hinge_compliance = 1.0 / stiffness_dt2.clamp_min(torch.finfo(dtype).tiny)
         self.gravity = torch.tensor(settings.gravity, device=self.device, dtype=dtype)
 
-    def _solve(self, p: Tensor, constraints: DistanceConstraints, compliance: float,
-               dt: float, lagrange: Tensor) -> None:
+    def _colours(self, constraints: DistanceConstraints, compliance: float
+                 ) -> tuple[float, tuple["_Colour", ...]]:
+        """The XPBD compliance ``compliance / dt^2`` and, per colour, what stays fixed
+        for the run: pairs, rest lengths, inverse masses, ``w_i + w_j + alpha``."""
+        dt = 1.0 / (self.settings.fps * self.settings.substeps)
         alpha = compliance / (dt * dt)
         w = self.inverse_mass
+        colours = []
         for start, stop in constraints.colour_slices:
             i, j = constraints.pairs[start:stop, 0], constraints.pairs[start:stop, 1]
-            delta = p[i] - p[j]
+            denominator = w[i] + w[j] + alpha
+            colours.append(_Colour(slice(start, stop), i, j, constraints.rest_lengths[start:stop],
+                                   w[i], w[j], denominator > 0, denominator.clamp_min(1e-30)))
+        return alpha, tuple(colours)
+
+    @staticmethod
+    def _solve(p: Tensor, alpha: float, colours: tuple["_Colour", ...],
+               lagrange: Tensor) -> None:
+        for c in colours:
+            delta = p[c.i] - p[c.j]
             length = delta.norm(dim=-1)
             normal = delta / length.clamp_min(1e-12).unsqueeze(-1)
-            violation = length - constraints.rest_lengths[start:stop]
-            denominator = w[i] + w[j] + alpha
-            step = torch.where(denominator > 0,
-                               (-violation - alpha * lagrange[start:stop]) /
-                               denominator.clamp_min(1e-30), torch.zeros_like(violation))
-            lagrange[start:stop] += step
-            p.index_add_(0, i, (w[i] * step).unsqueeze(-1) * normal)
-            p.index_add_(0, j, -(w[j] * step).unsqueeze(-1) * normal)
+            violation = length - c.rest_lengths
+            step = torch.where(c.solvable,
+                               (-violation - alpha * lagrange[c.rows]) / c.denominator,
+                               torch.zeros_like(violation))
+            lagrange[c.rows] += step
+            p.index_add_(0, c.i, (c.wi * step).unsqueeze(-1) * normal)
+            p.index_add_(0, c.j, -(c.wj * step).unsqueeze(-1) * normal)
 
     def _solve_hinges(self, p: Tensor, constraints: DihedralConstraints,
                       lagrange: Tensor) -> None:
@@ -268,6 +294,9 @@ class XPBDCloth:
         v = torch.zeros_like(x)
         dt = 1.0 / (s.fps * s.substeps)
         decay = float(np.exp(-s.damping * dt))
+        stretch_colours = self._colours(self.stretch, s.stretch_compliance)
+        if s.bending == "distance":
+            bend_colours = self._colours(self.bend, s.bend_compliance)
         stretch_lagrange = torch.zeros_like(self.stretch.rest_lengths)
         bend_lagrange = torch.zeros_like(self.bend.rest_lengths)
         recorder = FrameRecorder(frames, n, self.stretch, self.inverse_mass > 0, collider,
@@ -300,9 +329,9 @@ class XPBDCloth:
                 stretch_lagrange.zero_()
                 bend_lagrange.zero_()
                 for _ in range(s.iterations):
-                    self._solve(p, self.stretch, s.stretch_compliance, dt, stretch_lagrange)
+                    self._solve(p, *stretch_colours, stretch_lagrange)
                     if s.bending == "distance":
-                        self._solve(p, self.bend, s.bend_compliance, dt, bend_lagrange)
+                        self._solve(p, *bend_colours, bend_lagrange)
                     else:
                         self._solve_hinges(p, self.bend, bend_lagrange)
                     if self.tethers is not None:
