@@ -34,9 +34,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
-from torch import Tensor
-
 from scipy.sparse.csgraph import dijkstra
+from torch import Tensor
 
 from swingar_pyg.geometry.geodesic import edge_length_graph
 from swingar_pyg.geometry.mesh import Mesh, mesh_edges

@@ -16,13 +16,14 @@ angles (``bending="dihedral"``, the default and the datasets' model since
 simulator revision 4: :math:`C = \theta - \theta_0` wrapped to
 :math:`(-\pi, \pi]`, energy :math:`\tfrac12 k \|\mathbf{e}_0\| C^2` with
 ``bend_stiffness`` :math:`k`, as newton's VBD cloth, so the two simulators
-compare like for like; compliance :math:`1 / (k \|\mathbf{e}_0\|)`) or distance constraints between the
-opposite vertices of adjacent triangles (``bending="distance"``, revision 3's model:
-it also resists the in-plane compression that folding needs, so flares fall less).
-Each iteration then projects the tethers (:class:`~swingar_pyg.sim.constraints.
-TetherConstraints`): no free vertex ends farther from its nearest pin than its rest
-geodesic distance plus ``tether_slack``, which bounds stretch when few sweeps
-cannot carry the pins' pull across the cloth (large time steps, fast bodies).
+compare like for like; compliance :math:`1 / (k \|\mathbf{e}_0\|)`) or distance
+constraints between the opposite vertices of adjacent triangles
+(``bending="distance"``, revision 3's model: it also resists the in-plane
+compression that folding needs, so flares fall less). Each iteration then projects
+the tethers (:class:`~swingar_pyg.sim.constraints.TetherConstraints`): no free
+vertex ends farther from its nearest pin than its rest geodesic distance plus
+``tether_slack``, which bounds stretch when few sweeps cannot carry the pins' pull
+across the cloth (large time steps, fast bodies).
 Distance constraints are coloured so that each colour is a parallel Gauss–Seidel
 sweep. Hinges are solved in one Jacobi sweep, each vertex's corrections averaged
 over its hinges (Macklin et al. 2014): a hinge has four vertices, so colouring
@@ -186,10 +187,14 @@ class XPBDCloth:
         self.inverse_mass = inverse_mass.to(self.device, dtype)
         self.tethers = (tether_constraints(mesh, pinned).to(self.device, dtype)
                         if settings.tethers else None)
-        if settings.bending == "dihedral":
-            # Per hinge, fixed for the run: the corners' inverse masses and the XPBD
-            # compliance 1 / (k |e0| dt^2) (infinite, i.e. no bending, for k = 0).
-            dt = 1.0 / (settings.fps * settings.substeps)
+        # What stays fixed for every run: the substep, each distance colour's terms and,
+        # per hinge, the corners' inverse masses and the XPBD compliance 1 / (k |e0| dt^2)
+        # (infinite, i.e. no bending, for k = 0).
+        self.dt = dt = 1.0 / (settings.fps * settings.substeps)
+        self.stretch_colours = self._colours(self.stretch, settings.stretch_compliance)
+        if settings.bending == "distance":
+            self.bend_colours = self._colours(self.bend, settings.bend_compliance)
+        else:
             self.hinge_weights = self.inverse_mass[self.bend.hinges]
             stiffness_dt2 = settings.bend_stiffness * self.bend.rest_lengths * dt * dt
             self.hinge_compliance = 1.0 / stiffness_dt2.clamp_min(torch.finfo(dtype).tiny)
@@ -199,8 +204,7 @@ class XPBDCloth:
                  ) -> tuple[float, tuple["_Colour", ...]]:
         """The XPBD compliance ``compliance / dt^2`` and, per colour, what stays fixed
         for the run: pairs, rest lengths, inverse masses, ``w_i + w_j + alpha``."""
-        dt = 1.0 / (self.settings.fps * self.settings.substeps)
-        alpha = compliance / (dt * dt)
+        alpha = compliance / (self.dt * self.dt)
         w = self.inverse_mass
         colours = []
         for start, stop in constraints.colour_slices:
@@ -292,11 +296,8 @@ class XPBDCloth:
         x = initial.to(self.device, self.dtype).clone()
         targets = pin_targets.to(self.device, self.dtype)
         v = torch.zeros_like(x)
-        dt = 1.0 / (s.fps * s.substeps)
+        dt = self.dt
         decay = float(np.exp(-s.damping * dt))
-        stretch_colours = self._colours(self.stretch, s.stretch_compliance)
-        if s.bending == "distance":
-            bend_colours = self._colours(self.bend, s.bend_compliance)
         stretch_lagrange = torch.zeros_like(self.stretch.rest_lengths)
         bend_lagrange = torch.zeros_like(self.bend.rest_lengths)
         recorder = FrameRecorder(frames, n, self.stretch, self.inverse_mass > 0, collider,
@@ -329,9 +330,9 @@ class XPBDCloth:
                 stretch_lagrange.zero_()
                 bend_lagrange.zero_()
                 for _ in range(s.iterations):
-                    self._solve(p, *stretch_colours, stretch_lagrange)
+                    self._solve(p, *self.stretch_colours, stretch_lagrange)
                     if s.bending == "distance":
-                        self._solve(p, *bend_colours, bend_lagrange)
+                        self._solve(p, *self.bend_colours, bend_lagrange)
                     else:
                         self._solve_hinges(p, self.bend, bend_lagrange)
                     if self.tethers is not None:
