@@ -42,20 +42,35 @@ class BodyCollider:
         _, index = cKDTree(body.detach().cpu().numpy()).query(points.detach().cpu().numpy())
         return torch.as_tensor(np.asarray(index), device=points.device)
 
-    def contact_motion(self, frame: int, index: Tensor) -> Tensor:
-        """How far each contact point moves from ``frame - 1`` to ``frame``."""
-        return self.vertices[frame, index] - self.vertices[max(frame - 1, 0), index]
-
-    def planes(self, frame: int, index: Tensor, fraction: float) -> tuple[Tensor, Tensor]:
-        """Contact points and unit normals at ``fraction`` of the way from
-        ``frame - 1`` to ``frame``."""
+    def track(self, frame: int, index: Tensor) -> "ContactTrack":
+        """The body vertices ``index`` and their normals at ``frame - 1`` and ``frame``."""
         previous = max(frame - 1, 0)
-        point = torch.lerp(self.vertices[previous, index], self.vertices[frame, index], fraction)
-        normal = torch.lerp(self.normals[previous, index], self.normals[frame, index], fraction)
-        return point, torch.nn.functional.normalize(normal, dim=-1, eps=1e-12)
+        return ContactTrack(self.vertices[previous, index], self.vertices[frame, index],
+                            self.normals[previous, index], self.normals[frame, index])
 
     def signed_distance(self, frame: int, points: Tensor) -> Tensor:
         """Distance of each point above the tangent plane of its nearest body
         vertex (negative: inside the body)."""
-        point, normal = self.planes(frame, self.nearest(frame, points), 1.0)
+        point, normal = self.track(frame, self.nearest(frame, points)).planes(1.0)
         return ((points - point) * normal).sum(-1)
+
+
+@dataclass(frozen=True)
+class ContactTrack:
+    """Contact points and normals at the start and end of a frame."""
+
+    start: Tensor
+    end: Tensor
+    start_normal: Tensor
+    end_normal: Tensor
+
+    @property
+    def motion(self) -> Tensor:
+        """How far each contact point moves over the frame."""
+        return self.end - self.start
+
+    def planes(self, fraction: float) -> tuple[Tensor, Tensor]:
+        """Contact points and unit normals ``fraction`` of the way through the frame."""
+        normal = torch.lerp(self.start_normal, self.end_normal, fraction)
+        return (torch.lerp(self.start, self.end, fraction),
+                torch.nn.functional.normalize(normal, dim=-1, eps=1e-12))

@@ -157,36 +157,63 @@ class DihedralConstraints:
                                    self.share.to(device, dtype))
 
 
-def dihedral_angles(x1: Tensor, x2: Tensor, x3: Tensor, x4: Tensor
-                    ) -> tuple[Tensor, tuple[Tensor, Tensor, Tensor, Tensor], Tensor]:
-    """Signed angles of hinges ``(..., 3)`` each, their gradients with respect to the
-    four vertices, and whether both triangles have area (else the gradients are 0)."""
+def _dot(a: Tensor, b: Tensor) -> Tensor:
+    return (a * b).sum(0)
+
+
+def _cross(a: Tensor, b: Tensor) -> Tensor:
+    """``a x b`` of vectors stored coordinates first, ``(3, ...)``."""
+    (a1, a2, a3), (b1, b2, b3) = a, b
+    return torch.stack((a2 * b3 - a3 * b2, a3 * b1 - a1 * b3, a1 * b2 - a2 * b1))
+
+
+def dihedral_angles(corners: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+    r"""Signed angles of hinges, their gradients and whether both triangles have area.
+
+    For a hinge :math:`(x_1, x_2, x_3, x_4)` with edge :math:`e = x_4 - x_3` and wing
+    normals :math:`n_1 = (x_1 - x_3) \times (x_1 - x_4)`,
+    :math:`n_2 = (x_2 - x_4) \times (x_2 - x_3)`, the angle is
+    :math:`\theta = \operatorname{atan2}((n_1 \times n_2) \cdot e,\ |e|\, n_1 \cdot n_2)`
+    and, with :math:`m_i = n_i / |n_i|^2` and :math:`a_{ij} = (x_i - x_j) \cdot e / |e|`,
+
+    .. math::
+        \nabla_1 \theta = -|e| m_1, \quad \nabla_2 \theta = -|e| m_2, \quad
+        \nabla_3 \theta = -a_{14} m_1 - a_{24} m_2, \quad
+        \nabla_4 \theta = a_{13} m_1 + a_{23} m_2.
+
+    Args:
+        corners: ``(3, 4, H)`` coordinates first (one contiguous row per axis, which
+            makes these many small vector products several times faster on a CPU than
+            ``(H, 4, 3)``).
+
+    Returns:
+        ``(H,)`` angles, ``(3, 4, H)`` gradients (0 where invalid) and ``(H,)`` whether
+        both triangles are thicker than ``1e-6`` of the edge length squared.
+    """
+    x1, x2, x3, x4 = corners.unbind(1)
     e = x4 - x3
-    length = e.norm(dim=-1, keepdim=True)
-    n1 = torch.linalg.cross(x1 - x3, x1 - x4)
-    n2 = torch.linalg.cross(x2 - x4, x2 - x3)
-    area1, area2 = (n1 * n1).sum(-1, keepdim=True), (n2 * n2).sum(-1, keepdim=True)
-    # a triangle thinner than 1e-6 of its edge squared has no reliable normal
+    length = _dot(e, e).sqrt()
+    d13, d14, d23, d24 = x1 - x3, x1 - x4, x2 - x3, x2 - x4
+    n1 = _cross(d13, d14)
+    n2 = _cross(d24, d23)
+    area1, area2 = _dot(n1, n1), _dot(n2, n2)
     tiny = (1e-6 * length.square()).square()
     valid = (area1 > tiny) & (area2 > tiny)
-    m1 = torch.where(valid, n1 / area1.clamp_min(torch.finfo(x1.dtype).tiny), 0.0)
-    m2 = torch.where(valid, n2 / area2.clamp_min(torch.finfo(x1.dtype).tiny), 0.0)
-    unit1 = n1 / area1.sqrt().clamp_min(torch.finfo(x1.dtype).tiny)
-    unit2 = n2 / area2.sqrt().clamp_min(torch.finfo(x1.dtype).tiny)
-    axis = e / length.clamp_min(torch.finfo(x1.dtype).tiny)
-    angle = torch.atan2((torch.linalg.cross(unit1, unit2) * axis).sum(-1),
-                        (unit1 * unit2).sum(-1))
-    a13, a14, a23, a24 = (((x - y) * axis).sum(-1, keepdim=True)
-                          for x, y in ((x1, x3), (x1, x4), (x2, x3), (x2, x4)))
-    gradients = (-length * m1, -length * m2, -a14 * m1 - a24 * m2, a13 * m1 + a23 * m2)
-    return angle, gradients, valid.squeeze(-1)
+    floor = torch.finfo(corners.dtype).tiny
+    m1 = torch.where(valid, n1 / area1.clamp_min(floor), 0.0)
+    m2 = torch.where(valid, n2 / area2.clamp_min(floor), 0.0)
+    angle = torch.atan2(_dot(_cross(n1, n2), e), length * _dot(n1, n2))
+    inverse_length = 1.0 / length.clamp_min(floor)
+    a13, a14, a23, a24 = (_dot(d, e) * inverse_length for d in (d13, d14, d23, d24))
+    gradient = torch.stack((-length * m1, -length * m2, -a14 * m1 - a24 * m2,
+                            a13 * m1 + a23 * m2), 1)
+    return angle, gradient, valid
 
 
 def dihedral_constraints(mesh: Mesh) -> DihedralConstraints:
     """The hinges of ``mesh`` at the angles and edge lengths of its vertices."""
     rows = hinges(mesh)
-    x = torch.from_numpy(mesh.vertices[rows])
-    angle, _, _ = dihedral_angles(*x.unbind(1))
+    angle, _, _ = dihedral_angles(torch.from_numpy(mesh.vertices[rows.T].transpose(2, 0, 1)))
     lengths = np.linalg.norm(mesh.vertices[rows[:, 3]] - mesh.vertices[rows[:, 2]], axis=1)
     count = np.bincount(rows.reshape(-1), minlength=mesh.num_vertices)
     share = 1.0 / np.maximum(count, 1)

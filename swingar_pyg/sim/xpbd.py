@@ -42,7 +42,7 @@ import torch
 from torch import Tensor
 
 from swingar_pyg.geometry.mesh import Mesh
-from swingar_pyg.sim.collider import BodyCollider
+from swingar_pyg.sim.collider import BodyCollider, ContactTrack
 from swingar_pyg.sim.constraints import (
     DihedralConstraints,
     DistanceConstraints,
@@ -138,10 +138,9 @@ class _Colour:
     i: Tensor
     j: Tensor
     rest_lengths: Tensor
-    wi: Tensor
+    wi: Tensor  # (E, 1) inverse masses
     wj: Tensor
-    solvable: Tensor  # w_i + w_j + alpha > 0 (else the step is 0, not 0 / 0)
-    denominator: Tensor
+    inverse_denominator: Tensor  # 1 / (w_i + w_j + alpha), 0 where that is 0 (no step)
 
 
 def vertex_masses(mesh: Mesh, density: float) -> Tensor:
@@ -185,17 +184,20 @@ class XPBDCloth:
         inverse_mass = 1.0 / vertex_masses(mesh, settings.density)
         inverse_mass[pinned] = 0.0
         self.inverse_mass = inverse_mass.to(self.device, dtype)
+        self.free = self.inverse_mass > 0
         self.tethers = (tether_constraints(mesh, pinned).to(self.device, dtype)
                         if settings.tethers else None)
         # What stays fixed for every run: the substep, each distance colour's terms and,
-        # per hinge, the corners' inverse masses and the XPBD compliance 1 / (k |e0| dt^2)
-        # (infinite, i.e. no bending, for k = 0).
+        # per hinge, its corners (4, H), their inverse masses, those times each corner's
+        # share of its hinges, and the XPBD compliance 1 / (k |e0| dt^2).
         self.dt = dt = 1.0 / (settings.fps * settings.substeps)
         self.stretch_colours = self._colours(self.stretch, settings.stretch_compliance)
         if settings.bending == "distance":
             self.bend_colours = self._colours(self.bend, settings.bend_compliance)
         else:
-            self.hinge_weights = self.inverse_mass[self.bend.hinges]
+            self.hinge_corners = self.bend.hinges.T.contiguous()
+            self.hinge_weights = self.inverse_mass[self.hinge_corners]
+            self.hinge_shares = self.hinge_weights * self.bend.share[self.hinge_corners, 0]
             stiffness_dt2 = settings.bend_stiffness * self.bend.rest_lengths * dt * dt
             self.hinge_compliance = 1.0 / stiffness_dt2.clamp_min(torch.finfo(dtype).tiny)
         self.gravity = torch.tensor(settings.gravity, device=self.device, dtype=dtype)
@@ -203,31 +205,30 @@ class XPBDCloth:
     def _colours(self, constraints: DistanceConstraints, compliance: float
                  ) -> tuple[float, tuple["_Colour", ...]]:
         """The XPBD compliance ``compliance / dt^2`` and, per colour, what stays fixed
-        for the run: pairs, rest lengths, inverse masses, ``w_i + w_j + alpha``."""
+        for the run: pairs, rest lengths, inverse masses, ``1 / (w_i + w_j + alpha)``."""
         alpha = compliance / (self.dt * self.dt)
         w = self.inverse_mass
         colours = []
         for start, stop in constraints.colour_slices:
             i, j = constraints.pairs[start:stop, 0], constraints.pairs[start:stop, 1]
             denominator = w[i] + w[j] + alpha
+            inverse = torch.where(denominator > 0, 1.0 / denominator.clamp_min(1e-30), 0.0)
             colours.append(_Colour(slice(start, stop), i, j, constraints.rest_lengths[start:stop],
-                                   w[i], w[j], denominator > 0, denominator.clamp_min(1e-30)))
+                                   w[i, None], w[j, None], inverse))
         return alpha, tuple(colours)
 
     @staticmethod
     def _solve(p: Tensor, alpha: float, colours: tuple["_Colour", ...],
                lagrange: Tensor) -> None:
         for c in colours:
-            delta = p[c.i] - p[c.j]
-            length = delta.norm(dim=-1)
-            normal = delta / length.clamp_min(1e-12).unsqueeze(-1)
-            violation = length - c.rest_lengths
-            step = torch.where(c.solvable,
-                               (-violation - alpha * lagrange[c.rows]) / c.denominator,
-                               torch.zeros_like(violation))
-            lagrange[c.rows] += step
-            p.index_add_(0, c.i, (c.wi * step).unsqueeze(-1) * normal)
-            p.index_add_(0, c.j, -(c.wj * step).unsqueeze(-1) * normal)
+            delta = p.index_select(0, c.i) - p.index_select(0, c.j)
+            length = torch.linalg.vector_norm(delta, dim=-1)
+            multiplier = lagrange[c.rows]  # a view: updated in place below
+            step = (c.rest_lengths - length - alpha * multiplier) * c.inverse_denominator
+            multiplier += step
+            along = (step / length.clamp_min(1e-12)).unsqueeze(-1) * delta
+            p.index_add_(0, c.i, c.wi * along)
+            p.index_add_(0, c.j, -c.wj * along)
 
     def _solve_hinges(self, p: Tensor, constraints: DihedralConstraints,
                       lagrange: Tensor) -> None:
@@ -235,44 +236,42 @@ class XPBDCloth:
         positions, a vertex's corrections averaged over its hinges."""
         if self.settings.bend_stiffness == 0:
             return
-        rows = constraints.hinges
-        angle, gradients, valid = dihedral_angles(*p[rows].unbind(1))
-        gradient = torch.stack(gradients, 1)
+        # coordinates first, (3, 4, H): see dihedral_angles
+        corners = self.hinge_corners.reshape(-1)
+        angle, gradient, valid = dihedral_angles(
+            p.T.contiguous().index_select(1, corners).view(3, 4, -1))
         weights, alpha = self.hinge_weights, self.hinge_compliance
         difference = angle - constraints.rest_angles
         violation = torch.atan2(torch.sin(difference), torch.cos(difference))
-        denominator = alpha + (weights * gradient.square().sum(-1)).sum(-1)
+        denominator = alpha + (weights * gradient.square().sum(0)).sum(0)
         step = torch.where(valid & (denominator > 0),
                            (-violation - alpha * lagrange) / denominator,
                            torch.zeros_like(violation))
         lagrange += step
-        correction = ((weights * step.unsqueeze(-1)).unsqueeze(-1) * gradient).reshape(-1, 3)
-        p.add_(torch.zeros_like(p).index_add_(0, rows.reshape(-1), correction) *
-               constraints.share)
+        correction = (self.hinge_shares * step * gradient).view(3, -1)
+        p.add_(p.new_zeros(p.shape[::-1]).index_add_(1, corners, correction).T)
 
     def _tether(self, p: Tensor, tethers: TetherConstraints) -> None:
         """Moves each over-long tether's free end back onto its sphere around the pin."""
-        delta = p[tethers.vertices] - p[tethers.anchors]
-        length = delta.norm(dim=-1)
+        delta = p.index_select(0, tethers.vertices) - p.index_select(0, tethers.anchors)
+        length = torch.linalg.vector_norm(delta, dim=-1)
         excess = (length - (1.0 + self.settings.tether_slack) * tethers.rest_lengths
                   ).clamp_min(0.0)
         p.index_add_(0, tethers.vertices,
                      -(excess / length.clamp_min(1e-12)).unsqueeze(-1) * delta)
 
-    def _collide(self, p: Tensor, x: Tensor, collider: BodyCollider, frame: int,
-                 contact: Tensor, fraction: float, body_step: Tensor) -> None:
-        point, normal = collider.planes(frame, contact, fraction)
-        depth = ((p - point) * normal).sum(-1) - collider.thickness
-        touching = (depth < 0) & (self.inverse_mass > 0)
-        push_depth = torch.where(touching, -depth, torch.zeros_like(depth))
+    def _collide(self, p: Tensor, x: Tensor, track: ContactTrack, fraction: float,
+                 body_step: Tensor, thickness: float) -> None:
+        point, normal = track.planes(fraction)
+        depth = ((p - point) * normal).sum(-1) - thickness
+        push_depth = torch.where((depth < 0) & self.free, -depth, 0.0)
         # Coulomb friction in position form: the tangential slip against the body is
         # removed up to friction x the depth just resolved (the normal impulse).
         slip = (p - x) - body_step
         slip = slip - (slip * normal).sum(-1, keepdim=True) * normal
-        slip_length = slip.norm(dim=-1)
-        limit = self.settings.friction * push_depth
-        keep = torch.where(slip_length > limit, limit / slip_length.clamp_min(1e-12),
-                           torch.ones_like(slip_length))
+        slip_length = torch.linalg.vector_norm(slip, dim=-1)
+        keep = (self.settings.friction * push_depth / slip_length.clamp_min(1e-12)
+                ).clamp_max(1.0)
         p.add_(push_depth.unsqueeze(-1) * normal - keep.unsqueeze(-1) * slip)
 
     def strain(self, x: Tensor) -> Tensor:
@@ -300,8 +299,7 @@ class XPBDCloth:
         decay = float(np.exp(-s.damping * dt))
         stretch_lagrange = torch.zeros_like(self.stretch.rest_lengths)
         bend_lagrange = torch.zeros_like(self.bend.rest_lengths)
-        recorder = FrameRecorder(frames, n, self.stretch, self.inverse_mass > 0, collider,
-                                 self.dtype)
+        recorder = FrameRecorder(frames, n, self.stretch, self.free, collider, self.dtype)
 
         contact_interval = max(1, s.substeps // s.contacts_per_frame)
         schedule = [0] * s.settle_frames + list(range(frames))
@@ -314,14 +312,13 @@ class XPBDCloth:
             start = time.perf_counter()
             settling = step_index < s.settle_frames
             previous_target = targets[0] if settling else targets[max(frame - 1, 0)]
-            contact = body_step = None
+            track = body_step = None
             for sub in range(s.substeps):
                 fraction = (sub + 1) / s.substeps
                 if collider is not None and sub % contact_interval == 0:
                     at = 1.0 if settling else sub / s.substeps
-                    contact = collider.nearest(frame, x, at)
-                    body_step = collider.contact_motion(frame, contact).to(
-                        self.device, self.dtype) / s.substeps
+                    track = collider.track(frame, collider.nearest(frame, x, at))
+                    body_step = track.motion.to(self.device, self.dtype) / s.substeps
                     if settling:
                         body_step = torch.zeros_like(body_step)
                 v = (v + dt * self.gravity) * decay
@@ -339,7 +336,8 @@ class XPBDCloth:
                         self._tether(p, self.tethers)
                     if collider is not None:
                         body_fraction = 1.0 if settling else fraction
-                        self._collide(p, x, collider, frame, contact, body_fraction, body_step)
+                        self._collide(p, x, track, body_fraction, body_step,
+                                      collider.thickness)
                 v = (p - x) / dt
                 x = p
             if settling:
