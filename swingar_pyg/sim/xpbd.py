@@ -220,6 +220,11 @@ class XPBDCloth:
     @staticmethod
     def _solve(p: Tensor, alpha: float, colours: tuple["_Colour", ...],
                lagrange: Tensor) -> None:
+        r"""One Gauss–Seidel sweep, colour by colour, each colour's pairs at once:
+        :math:`\Delta\lambda = (d_0 - |x_i - x_j| - \tilde\alpha \lambda) /
+        (w_i + w_j + \tilde\alpha)`, :math:`x_i \mathrel{+}= w_i \Delta\lambda\, n`,
+        :math:`x_j \mathrel{-}= w_j \Delta\lambda\, n` along the unit
+        :math:`n = (x_i - x_j) / |x_i - x_j|`."""
         for c in colours:
             delta = p.index_select(0, c.i) - p.index_select(0, c.j)
             length = torch.linalg.vector_norm(delta, dim=-1)
@@ -245,8 +250,7 @@ class XPBDCloth:
         violation = torch.atan2(torch.sin(difference), torch.cos(difference))
         denominator = alpha + (weights * gradient.square().sum(0)).sum(0)
         step = torch.where(valid & (denominator > 0),
-                           (-violation - alpha * lagrange) / denominator,
-                           torch.zeros_like(violation))
+                           (-violation - alpha * lagrange) / denominator, 0.0)
         lagrange += step
         correction = (self.hinge_shares * step * gradient).view(3, -1)
         p.add_(p.new_zeros(p.shape[::-1]).index_add_(1, corners, correction).T)
