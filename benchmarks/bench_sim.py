@@ -42,6 +42,7 @@ from swingar_pyg.world.sequence import simulate_sequence  # noqa: E402
 REFERENCE = (100, 4)
 SETTINGS = [(5, 2), (10, 2), (20, 2), (50, 2), (20, 5), (50, 4)]
 PERTURBATION = 1e-6  # metres; float32 positions near 1 m resolve ~1e-7
+MOVED = f"{PERTURBATION * 1e6:g} µm"
 
 
 def perturbed(garment: Garment, scale: float, seed: int = 0) -> Garment:
@@ -68,7 +69,7 @@ def plot(rows: list[dict]):
                                 label=f"{row['vertices']} vertices")
         floor = next(r for r in row["runs"] if r["perturbed"])["mean_error_mm"]
         error_axis.axhline(floor, color=line.get_color(), linestyle="--", linewidth=0.8,
-                           label=f"{row['vertices']}: reference moved 1 µm")
+                           label=f"{row['vertices']}: reference moved {MOVED}")
         for r, t in zip(runs, times):
             error_axis.annotate(f"{r['substeps']}x{r['iterations']}", (t, r["mean_error_mm"]),
                                 fontsize=6, xytext=(3, 3), textcoords="offset points")
@@ -134,7 +135,7 @@ def main() -> None:
                          "max_penetration": float(np.nanmax(result.penetration))})
             r = runs[-1]
             print(f"N={garment.mesh.num_vertices:>5} {substeps:>3}x{iterations}"
-                  f"{' moved 1 um' if scene is moved else ''}: "
+                  f"{f' moved {MOVED}' if scene is moved else ''}: "
                   f"{r['ms_per_frame']:7.1f} ms/frame, error {r['mean_error_mm']:6.1f} mm "
                   f"(p95 {r['p95_error_mm']:6.1f}), max strain {100 * r['max_strain']:5.1f} %, "
                   f"inside {100 * r['max_penetration']:.2f} %", flush=True)

@@ -44,7 +44,6 @@ from torch import Tensor
 from swingar_pyg.geometry.mesh import Mesh
 from swingar_pyg.sim.collider import BodyCollider, ContactTrack
 from swingar_pyg.sim.constraints import (
-    DihedralConstraints,
     DistanceConstraints,
     TetherConstraints,
     bending_pairs,
@@ -235,8 +234,7 @@ class XPBDCloth:
             p.index_add_(0, c.i, c.wi * along)
             p.index_add_(0, c.j, -c.wj * along)
 
-    def _solve_hinges(self, p: Tensor, constraints: DihedralConstraints,
-                      lagrange: Tensor) -> None:
+    def _solve_hinges(self, p: Tensor, lagrange: Tensor) -> None:
         """One Jacobi sweep over every hinge: each hinge's XPBD step from the same
         positions, a vertex's corrections averaged over its hinges."""
         if self.settings.bend_stiffness == 0:
@@ -246,7 +244,7 @@ class XPBDCloth:
         angle, gradient, valid = dihedral_angles(
             p.T.contiguous().index_select(1, corners).view(3, 4, -1))
         weights, alpha = self.hinge_weights, self.hinge_compliance
-        difference = angle - constraints.rest_angles
+        difference = angle - self.bend.rest_angles
         violation = torch.atan2(torch.sin(difference), torch.cos(difference))
         denominator = alpha + (weights * gradient.square().sum(0)).sum(0)
         step = torch.where(valid & (denominator > 0),
@@ -335,7 +333,7 @@ class XPBDCloth:
                     if s.bending == "distance":
                         self._solve(p, *self.bend_colours, bend_lagrange)
                     else:
-                        self._solve_hinges(p, self.bend, bend_lagrange)
+                        self._solve_hinges(p, bend_lagrange)
                     if self.tethers is not None:
                         self._tether(p, self.tethers)
                     if collider is not None:
