@@ -21,7 +21,6 @@ Writes ``benchmarks/results/bench_sim.json`` and ``bench_sim.png``.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import sys
 from pathlib import Path
 
@@ -30,12 +29,11 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import machine_info, write_results  # noqa: E402
+from common import machine_info, perturbed, write_results  # noqa: E402
 
-from swingar_pyg.geometry import as_mesh  # noqa: E402
 from swingar_pyg.sim import XPBDSettings  # noqa: E402
 from swingar_pyg.world.body import AnnyBody  # noqa: E402
-from swingar_pyg.world.garment import Garment, SkirtSpec, fit_procedural_skirt  # noqa: E402
+from swingar_pyg.world.garment import SkirtSpec, fit_procedural_skirt  # noqa: E402
 from swingar_pyg.world.motion import procedural_motion  # noqa: E402
 from swingar_pyg.world.sequence import simulate_sequence  # noqa: E402
 
@@ -43,13 +41,6 @@ REFERENCE = (100, 4)
 SETTINGS = [(5, 2), (10, 2), (20, 2), (50, 2), (20, 5), (50, 4)]
 PERTURBATION = 1e-6  # metres; float32 positions near 1 m resolve ~1e-7
 MOVED = f"{PERTURBATION * 1e6:g} µm"
-
-
-def perturbed(garment: Garment, scale: float, seed: int = 0) -> Garment:
-    """``garment`` with every rest vertex moved by ``scale`` times a standard normal."""
-    vertices = garment.mesh.vertices + scale * np.random.default_rng(seed).standard_normal(
-        garment.mesh.vertices.shape)
-    return dataclasses.replace(garment, mesh=as_mesh(vertices, garment.mesh.faces))
 
 
 def plot(rows: list[dict]):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import platform
@@ -11,9 +12,12 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any, Callable
 
+import numpy as np
 import torch
 
 from swingar_pyg.atomic import atomic_path
+from swingar_pyg.geometry import as_mesh
+from swingar_pyg.world.garment import Garment
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -58,3 +62,11 @@ def write_results(name: str, payload: dict[str, Any], figure: Any | None = None)
         with atomic_path(RESULTS / f"{name}.png") as tmp:
             figure.savefig(tmp, format="png", dpi=120, bbox_inches="tight")
     return json_path
+
+
+def perturbed(garment: Garment, scale: float, seed: int = 0) -> Garment:
+    """``garment`` with every rest vertex moved by ``scale`` times a standard normal: the
+    same scene again, to see how far a chaotic run's figures move by themselves."""
+    vertices = garment.mesh.vertices + scale * np.random.default_rng(seed).standard_normal(
+        garment.mesh.vertices.shape)
+    return dataclasses.replace(garment, mesh=as_mesh(vertices, garment.mesh.faces))

@@ -172,7 +172,9 @@ def trained_chain():
                                    temperature=0.02), length_unit=0.01, lr=3e-3)
     optimizer = torch.optim.Adam(module.parameters(), lr=3e-3)
     generator = torch.Generator().manual_seed(4)
-    for _ in range(600):
+    # 900 steps: at 600 the unseen-pose error sat at the 3 mm bound (3.1 mm on one machine,
+    # under 3 on another: their float rounding differs); at 900 it is 1.8 mm.
+    for _ in range(900):
         bend = (torch.rand(8, generator=generator) - 0.5) * 2.4
         transforms, heads = chain_pose(bend)
         points = near_chain_points(heads, 128, generator)

@@ -6,7 +6,8 @@ import torch
 
 from swingar_pyg.geometry import signed_distance_to_surface, split_quads, vertex_normals
 from swingar_pyg.geometry.skinning import linear_blend_skinning
-from swingar_pyg.world.garment import SkirtSpec, fit_procedural_skirt, procedural_skirt
+from swingar_pyg.world.garment import (DressSpec, SkirtSpec, body_envelope, fit_procedural_skirt,
+                                      procedural_skirt)
 from swingar_pyg.world.motion import EXTREME_MOTIONS, PROCEDURAL_MOTIONS, procedural_motion
 
 CMU_JOINTS = ('Hips', 'LHipJoint', 'LeftUpLeg', 'LeftLeg', 'LeftFoot', 'LowerBack', 'Spine',
@@ -79,7 +80,8 @@ def test_skirt_fits_outside_the_body(spec):
     garment = procedural_skirt(spec, body, faces, ('Hips',), indices, weights)
     v = garment.mesh.vertices
     radial = np.linalg.norm(v[:, :2], axis=1)
-    assert radial.min() >= 0.15 + spec.clearance - 1e-9
+    # The tube is a 48-gon: its flat sides lie 0.15 cos(pi / 48) from the axis.
+    assert radial.min() >= 0.15 * math.cos(math.pi / 48) + spec.clearance - 1e-9
     assert abs(garment.mesh.num_vertices - spec.vertices) < 0.15 * spec.vertices
     assert np.allclose(v[garment.pinned, 2], spec.waist_height)
     assert np.isclose(v[:, 2].min(), spec.waist_height - spec.length)
@@ -88,6 +90,25 @@ def test_skirt_fits_outside_the_body(spec):
     assert garment.skin_indices.shape == (len(v), 1)
     # The fit attribute is the signed distance to the tube: radius - 0.15 here.
     assert np.allclose(garment.fit, radial - 0.15, atol=2e-3)
+
+
+def test_body_envelope_is_the_convex_hull_of_a_sparse_cross_section():
+    # Six vertices of a regular hexagon (circumradius R, centred on the axis): every
+    # direction meets the hull, at R cos(pi/6) / cos(theta - theta_side), theta_side the
+    # direction of the nearest side's midpoint; bins between vertices are not holes.
+    R = 0.1
+    corner = np.arange(6) * np.pi / 3
+    ring = np.stack([R * np.cos(corner), R * np.sin(corner), np.zeros(6)], axis=-1)
+    angles = np.linspace(-np.pi, np.pi, 361)[:-1]
+    envelope = body_envelope(ring, np.ones(6, bool), np.array([0.0, 1.0]), angles)
+    side = (np.floor(angles / (np.pi / 3)) + 0.5) * np.pi / 3
+    expected = R * np.cos(np.pi / 6) / np.cos(angles - side)
+    np.testing.assert_allclose(envelope[0], expected, rtol=1e-9)
+    assert (envelope[1] == 0).all()  # no vertex at that height
+    # Two legs: the hull bridges the gap between them instead of dipping into it.
+    legs = np.concatenate([ring + [0.15, 0.0, 0.0], ring - [0.15, 0.0, 0.0]])
+    gap = body_envelope(legs, np.ones(12, bool), np.array([0.0]), np.array([np.pi / 2]))
+    np.testing.assert_allclose(gap, [[R * np.cos(np.pi / 6)]], rtol=1e-9)
 
 
 def test_irregular_skirt_has_a_different_topology():
@@ -168,22 +189,32 @@ def test_skirt_swings_on_a_walking_body_without_stretch_or_penetration(anny_body
     # Walking swings the thighs into the skirt: the case that once pushed cloth
     # through a leg (contacts paired against the body's end-of-frame pose).
     motion = procedural_motion('walk', anny_body.joint_names, seconds=2.0)
-    sequence = simulate_sequence(anny_body, shape, garment, motion, XPBDSettings(settle_frames=5))
+    # At 100 substeps (configs/data/full.yaml's) a walk's largest stretch is 4-8 % whatever
+    # micrometre the garment is moved by (benchmarks/bench_strain.py); at 50 it is chaotic,
+    # 7-15 % on this skirt.
+    settings = XPBDSettings(settle_frames=5, substeps=100)
+    sequence = simulate_sequence(anny_body, shape, garment, motion, settings)
     result, skinned = sequence.result, sequence.rigid
     assert torch.isfinite(result.positions).all()
-    assert result.max_stretch.max() < 0.12
+    assert result.max_stretch.max() < 0.08
     assert np.nanmax(result.penetration) == 0
     # The hem lags and swings (rigid skinning would carry it along).
     assert (result.positions - skinned).norm(dim=-1).max() > 0.02
 
 
-@pytest.mark.parametrize('vertices', [600, 4000])
-def test_skirts_of_any_resolution_start_outside_the_body(anny_body, vertices):
+@pytest.mark.parametrize('spec', [SkirtSpec(vertices=600), SkirtSpec(vertices=4000),
+                                  DressSpec(vertices=400), DressSpec(vertices=1500),
+                                  DressSpec(length=1.0, flare=0.3, vertices=1200, jitter=0.3)],
+                         ids=['skirt-600', 'skirt-4000', 'dress-400', 'dress-1500',
+                              'dress-1200-irregular'])
+def test_skirts_and_dresses_of_any_resolution_start_outside_the_body(anny_body, spec):
+    # A dress of 1,000-1,500 vertices once started up to 2 cm inside the chest: the
+    # envelope, binned by angle, had holes where the body's vertices are sparse.
     import trimesh
 
     shape = anny_body.default_shape()
     rest = anny_body.rest_vertices(shape).numpy()
-    garment = fit_procedural_skirt(SkirtSpec(vertices=vertices), anny_body, shape)
+    garment = fit_procedural_skirt(spec, anny_body, shape)
     body = trimesh.Trimesh(rest, anny_body.faces.numpy(), process=False)
     # Inside: behind the face nearest to the point (exact closest point on the mesh).
     closest, _, face = trimesh.proximity.closest_point(body, garment.mesh.vertices)

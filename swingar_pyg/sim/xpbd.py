@@ -61,8 +61,10 @@ from swingar_pyg.sim.recording import (
 )
 
 # Raise whenever a change alters simulated positions: dataset files record it, and the
-# datamodule warns when it trains on sequences an older simulator made.
-SIMULATOR_REVISION = 4
+# datamodule warns when it trains on sequences an older simulator made. Revision 5: the
+# solver of revision 4, on procedural skirts and dresses whose rest shapes wrap the convex
+# hull of the body's cross-sections (revision 4's binned envelope put dresses inside chests).
+SIMULATOR_REVISION = 5
 
 
 @dataclass(frozen=True)

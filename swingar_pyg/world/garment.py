@@ -26,7 +26,6 @@ ARM_BONE_WORDS = ("Shoulder", "Arm", "Hand", "Thumb", "Finger")
 # Pins (waistband, neckline) ride on the torso: they follow its joints only, or the
 # thighs would drag a waistband out of shape in a stride (measured: 37 % strain running).
 _LIMB_WORDS = ("Leg", "Foot", "Toe", "HipJoint") + ARM_BONE_WORDS
-_ENVELOPE_BINS = 72
 
 
 def topology_tag(jitter: float) -> str:
@@ -178,28 +177,50 @@ def fit_garment(spec, body: "BodyModel", shape) -> Garment:
 
 def body_envelope(vertices: np.ndarray, keep: np.ndarray, heights: np.ndarray,
                   angles: np.ndarray, band: float = 0.03) -> np.ndarray:
-    """Largest horizontal distance of the kept body vertices from the vertical
-    axis through their centroid, per height and angle: ``(len(heights), len(angles))``.
+    r"""Distance from the vertical axis through the kept body vertices' centroid
+    :math:`\mathbf{c}` to the convex hull of the body's cross-section, per height
+    and angle: ``(len(heights), len(angles))``.
 
-    A vertex counts for the heights within ``band`` and the nearest angle bins.
-    Where no vertex is found the envelope is 0.
+    The cross-section at height :math:`z` is the kept vertices within ``band`` of
+    :math:`z`, projected on the horizontal plane. Its convex hull is the half-planes
+    :math:`\mathbf{a}_k^\top \mathbf{q} + b_k \le 0` (unit :math:`\mathbf{a}_k`), and
+    the envelope along :math:`\mathbf{u} = (\cos\theta, \sin\theta)` is where the
+    ray :math:`\mathbf{c} + t\,\mathbf{u}` leaves it:
+
+    .. math::
+        r(\theta) = \min_{k:\ \mathbf{a}_k^\top \mathbf{u} > 0}
+        \frac{-(\mathbf{a}_k^\top \mathbf{c} + b_k)}{\mathbf{a}_k^\top \mathbf{u}}.
+
+    A skirt wraps that hull: it bridges the hollow between the breasts and the gap
+    between the legs instead of following them, and however sparse the body's
+    vertices, the envelope has no holes. Where the hull does not exist (fewer than
+    three vertices, or all on a line) or does not contain the axis, the envelope is
+    the largest distance of those vertices from the axis (0 where there are none).
     """
+    from scipy.spatial import ConvexHull, QhullError
+
     points = vertices[keep]
     centre = points[:, :2].mean(axis=0)
-    offset = points[:, :2] - centre
-    radius = np.linalg.norm(offset, axis=1)
-    theta = np.arctan2(offset[:, 1], offset[:, 0])
-    bins = len(angles)
-    envelope = np.zeros((len(heights), bins))
+    direction = np.stack([np.cos(angles), np.sin(angles)], axis=-1)
+    envelope = np.zeros((len(heights), len(angles)))
     for k, z in enumerate(heights):
-        near = np.abs(points[:, 2] - z) < band
-        if not near.any():
+        section = points[np.abs(points[:, 2] - z) < band, :2]
+        if not len(section):
             continue
-        index = np.round((theta[near] + math.pi) / (2 * math.pi) * bins).astype(int) % bins
-        row = np.zeros(bins)
-        np.maximum.at(row, index, radius[near])
-        # A vertex covers its neighbouring bins too, so sparse rows have no holes.
-        envelope[k] = np.maximum.reduce([row, np.roll(row, 1), np.roll(row, -1)])
+        fallback = np.linalg.norm(section - centre, axis=1).max()
+        try:
+            hull = ConvexHull(section)
+        except QhullError:
+            envelope[k] = fallback
+            continue
+        normal, offset = hull.equations[:, :2], hull.equations[:, 2]
+        depth = -(normal @ centre + offset)  # > 0 for every facet iff the axis is inside
+        if (depth <= 0).any():
+            envelope[k] = fallback
+            continue
+        facing = direction @ normal.T  # (angles, facets)
+        reach = np.where(facing > 0, depth / np.where(facing > 0, facing, 1.0), np.inf)
+        envelope[k] = reach.min(axis=1)
     return envelope
 
 
@@ -209,7 +230,8 @@ def procedural_skirt(spec: SkirtSpec, body_vertices: np.ndarray, body_faces: np.
     """Fits ``spec`` around a body (rest-pose ``body_vertices`` and ``body_faces``).
 
     Rings run from the waist (pinned) to the hem; at each ring and angle the radius
-    is the larger of the flared profile and the body's envelope plus clearance.
+    is the larger of the flared profile and the body's envelope
+    (:func:`body_envelope`, the convex hull of its cross-section) plus clearance.
     """
     body_vertices = np.asarray(body_vertices, dtype=np.float64)
     keep = ~np.isin(dominant_joints(skin_indices, skin_weights),
@@ -220,12 +242,7 @@ def procedural_skirt(spec: SkirtSpec, body_vertices: np.ndarray, body_faces: np.
     rings = max(3, round(spec.vertices / segments))
     angles = -math.pi + 2 * math.pi * np.arange(segments) / segments
     heights = spec.waist_height - spec.length * np.linspace(0.0, 1.0, rings)
-    # The envelope is measured on a fixed 5-degree grid and interpolated to the
-    # garment's segments: bins as fine as a dense garment's would miss body vertices.
-    grid = -math.pi + 2 * math.pi * np.arange(_ENVELOPE_BINS) / _ENVELOPE_BINS
-    coarse = body_envelope(body_vertices, keep, heights, grid)
-    envelope = np.stack([np.interp(angles, grid, row, period=2 * math.pi) for row in coarse])
-    envelope += spec.clearance
+    envelope = body_envelope(body_vertices, keep, heights, angles) + spec.clearance
     waist = envelope[0]
     drop = spec.waist_height - heights
     flared = waist[None, :] + drop[:, None] * math.tan(math.asin(spec.flare))
