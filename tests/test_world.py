@@ -109,6 +109,14 @@ def test_body_envelope_is_the_convex_hull_of_a_sparse_cross_section():
     legs = np.concatenate([ring + [0.15, 0.0, 0.0], ring - [0.15, 0.0, 0.0]])
     gap = body_envelope(legs, np.ones(12, bool), np.array([0.0]), np.array([np.pi / 2]))
     np.testing.assert_allclose(gap, [[R * np.cos(np.pi / 6)]], rtol=1e-9)
+    # No hull (three vertices on a line) or a hull beside the axis: the farthest vertex.
+    line = np.array([[0.0, 0.1, 2.0], [0.0, 0.2, 2.0], [0.0, 0.3, 2.0]])
+    aside = 0.1 * ring + [0.5, 0.0, 3.0]
+    points = np.concatenate([ring, line, aside])
+    centre = points[:, :2].mean(axis=0)
+    far = body_envelope(points, np.ones(len(points), bool), np.array([2.0, 3.0]), angles[:3])
+    for row, section in zip(far, (line, aside)):
+        np.testing.assert_allclose(row, np.linalg.norm(section[:, :2] - centre, axis=1).max())
 
 
 def test_irregular_skirt_has_a_different_topology():
