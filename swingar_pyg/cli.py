@@ -79,6 +79,7 @@ def _simulate(args: argparse.Namespace) -> int:
 
 
 def _make_dataset(args: argparse.Namespace) -> int:
+    from swingar_pyg.sim import STRETCH_BAR
     from swingar_pyg.world.dataset import DatasetConfig, make_dataset
 
     config = DatasetConfig.from_yaml(args.config)
@@ -96,7 +97,10 @@ def _make_dataset(args: argparse.Namespace) -> int:
     if "simulation" in summary:
         sim = summary["simulation"]
         print(f"  simulator: {sim['ms_per_frame_median']:.0f} ms/frame (median), largest edge "
-              f"strain {100 * sim['max_stretch']:.1f} %, largest share of vertices inside the "
+              f"strain {100 * sim['max_stretch']:.1f} % (a sequence's largest: median "
+              f"{100 * sim['max_stretch_median_sequence']:.1f} %, "
+              f"{100 * sim['share_over_stretch_bar']:.0f} % of sequences above "
+              f"{100 * STRETCH_BAR:g} %), largest share of vertices inside the "
               f"body {100 * sim['max_penetration']:.2f} %")
     return 0
 

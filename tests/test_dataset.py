@@ -4,6 +4,7 @@ import h5py
 import numpy as np
 import pytest
 
+from swingar_pyg.sim import STRETCH_BAR
 from swingar_pyg.world.dataset import DatasetConfig, make_dataset, plan_jobs
 
 TINY = """
@@ -72,6 +73,14 @@ def test_generation_resumes_and_merges(tmp_path):
         exact = file['sequences/train-00001/penetration_exact'][:]
         assert exact.shape == (len(reference),) and ((exact >= 0) & (exact <= 1)).all()
     assert 0 <= first['simulation']['max_penetration_exact'] <= 1
+    largest = []
+    for split in ('train', 'test'):
+        with h5py.File(output / f'{split}.h5') as file:
+            largest += [g['max_stretch'][:].max() for g in file['sequences'].values()]
+    assert len(largest) == 3
+    assert np.isclose(first['simulation']['max_stretch_median_sequence'], np.median(largest))
+    assert np.isclose(first['simulation']['share_over_stretch_bar'],
+                      np.mean(np.array(largest) > STRETCH_BAR))
     # A killed run leaves some parts; only the missing ones are simulated again.
     (output / 'parts' / 'train' / 'train-00001.h5').unlink()
     (output / 'train.h5').unlink()

@@ -13,6 +13,11 @@ from swingar_pyg.sim.collider import BodyCollider
 from swingar_pyg.sim.constraints import DistanceConstraints
 
 
+# The largest edge stretch issue #3 asks of a simulated sequence (benchmarks/bench_strain.py
+# measures which settings and motions keep to it).
+STRETCH_BAR = 0.06
+
+
 @dataclass
 class SimulationResult:
     """A simulated sequence and how it was obtained.
