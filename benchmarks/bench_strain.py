@@ -1,6 +1,6 @@
 """The ground-truth simulator's largest edge strain, by motion and solver setting.
 
-    OMP_NUM_THREADS=1 python benchmarks/bench_strain.py            # ~30 minutes, 2 processes
+    OMP_NUM_THREADS=1 python benchmarks/bench_strain.py            # ~17 minutes, 2 processes
     OMP_NUM_THREADS=1 python benchmarks/bench_strain.py --quick    # 300 vertices, 1 s, 2 motions
 
 Scene: a procedural knee-length skirt on the default anny body doing each motion of ``MOTIONS``
@@ -37,6 +37,7 @@ from common import machine_info, perturbed, write_results  # noqa: E402
 
 from swingar_pyg.geometry.mesh import mesh_edges  # noqa: E402
 from swingar_pyg.sim import STRETCH_BAR, XPBDSettings  # noqa: E402
+from swingar_pyg.sim.recording import signed_edge_strain  # noqa: E402
 from swingar_pyg.world.body import AnnyBody  # noqa: E402
 from swingar_pyg.world.garment import SkirtSpec, fit_procedural_skirt  # noqa: E402
 from swingar_pyg.world.motion import procedural_motion  # noqa: E402
@@ -67,8 +68,7 @@ def run(vertices: int, motion: str, amplitude: float, seconds: float, substeps: 
     edges = torch.as_tensor(mesh_edges(garment.mesh.faces))
     rest = torch.as_tensor(garment.mesh.vertices, dtype=torch.float32)
     rest_length = (rest[edges[:, 0]] - rest[edges[:, 1]]).norm(dim=-1)
-    x = result.positions
-    strain = (x[:, edges[:, 0]] - x[:, edges[:, 1]]).norm(dim=-1) / rest_length - 1.0
+    strain = signed_edge_strain(result.positions, edges, rest_length)
     return {"motion": motion, "amplitude": amplitude, "substeps": substeps,
             "iterations": iterations, "repeat": repeat,
             "ms_per_frame": 1e3 * float(np.median(result.seconds_per_frame)),

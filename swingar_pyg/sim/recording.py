@@ -55,12 +55,18 @@ def check_inputs(initial: Tensor, pin_targets: Tensor, vertices: int, pins: int,
         raise ValueError("initial positions and pin targets must be finite")
 
 
+def signed_edge_strain(x: Tensor, pairs: Tensor, rest_lengths: Tensor) -> Tensor:
+    r"""Edge strain :math:`l / L - 1` of positions ``x`` ``(..., N, 3)`` for the vertex
+    ``pairs`` ``(E, 2)`` of rest lengths :math:`L`: positive stretched, negative
+    compressed; ``(..., E)``."""
+    length = (x[..., pairs[:, 0], :] - x[..., pairs[:, 1], :]).norm(dim=-1)
+    return length / rest_lengths.clamp_min(1e-12) - 1.0
+
+
 def edge_strain(x: Tensor, stretch: DistanceConstraints) -> Tensor:
     r"""Edge strain :math:`|l / L - 1|` of positions ``x`` ``(N, 3)`` against the rest
     lengths :math:`L` of the stretch constraints."""
-    pairs = stretch.pairs
-    length = (x[pairs[:, 0]] - x[pairs[:, 1]]).norm(dim=-1)
-    return (length / stretch.rest_lengths.clamp_min(1e-12) - 1.0).abs()
+    return signed_edge_strain(x, stretch.pairs, stretch.rest_lengths).abs()
 
 
 class FrameRecorder:
