@@ -6,8 +6,9 @@ import torch
 
 from swingar_pyg.geometry import signed_distance_to_surface, split_quads, vertex_normals
 from swingar_pyg.geometry.skinning import linear_blend_skinning
+from swingar_pyg.geometry.mesh import as_mesh
 from swingar_pyg.world.garment import (DressSpec, SkirtSpec, body_envelope, fit_procedural_skirt,
-                                      procedural_skirt)
+                                      pin_bands, procedural_skirt)
 from swingar_pyg.world.motion import EXTREME_MOTIONS, PROCEDURAL_MOTIONS, procedural_motion
 
 CMU_JOINTS = ('Hips', 'LHipJoint', 'LeftUpLeg', 'LeftLeg', 'LeftFoot', 'LowerBack', 'Spine',
@@ -240,6 +241,58 @@ def test_the_waistband_follows_the_pelvis_not_the_thighs(anny_body):
     free = np.setdiff1d(np.arange(garment.mesh.num_vertices), garment.pinned)
     legs = {names[j] for j in garment.skin_indices[free].ravel()}
     assert any('Leg' in n for n in legs)  # the rest of the skirt keeps the body's weights
+
+
+def test_pin_bands_are_the_pieces_of_pinned_mesh_edges():
+    # two separate quad strips, each pinned along its top row, and a triangle pinned at one
+    # corner
+    strip = split_quads(np.array([[0, 1]]), np.array([[1, 2]]), np.array([[4, 5]]),
+                        np.array([[3, 4]]), np.zeros((1, 2), dtype=bool))
+    vertices = np.array([[x, 0.0, z] for z in (1.0, 0.0) for x in (0.0, 1.0, 2.0)])
+    triangle = np.array([[9.0, 0.0, 0.0], [10.0, 0.0, 0.0], [9.0, 0.0, 1.0]])
+    mesh = as_mesh(np.concatenate([vertices, vertices + [5.0, 0.0, 0.0], triangle]),
+                   np.concatenate([strip, strip + 6, [[12, 13, 14]]]))
+    pinned = np.array([0, 1, 2, 6, 7, 8, 14])
+    bands = pin_bands(mesh, pinned)
+    assert sorted(pinned[b].tolist() for b in bands) == [[0, 1, 2], [6, 7, 8], [14]]
+    assert pin_bands(mesh, np.zeros(0, dtype=np.int64)) == []
+
+
+def test_a_dress_top_band_moves_as_one_where_the_body_skin_stretches(anny_body):
+    # In a twist, anny's chest skin stretches by half under linear blend skinning; a band
+    # skinned point by point with it stretched by 40 %. Each band shares one set of weights.
+    from swingar_pyg.sim import BodyCollider
+    from swingar_pyg.world.garment import fit_garment, mesh_edges
+
+    shape = anny_body.default_shape()
+    dress = fit_garment(DressSpec(length=0.9, vertices=1000), anny_body, shape)
+    motion = procedural_motion('twist', anny_body.joint_names, seconds=1.5)
+    posed = anny_body.pose(shape, motion.rotations, motion.translation)
+    band = dress.skin_weights[dress.pinned]
+    assert np.allclose(band, band[0]) and np.allclose(band.sum(1), 1.0)
+
+    def largest_strain(rest, moved, edges):
+        length = np.linalg.norm(rest[edges[:, 0]] - rest[edges[:, 1]], axis=1)
+        return np.abs(np.linalg.norm(moved[:, edges[:, 0]] - moved[:, edges[:, 1]], axis=2)
+                      / length - 1).max()
+
+    body_rest = anny_body.rest_vertices(shape).numpy()
+    chest = np.abs(body_rest[:, 2] - dress.mesh.vertices[dress.pinned, 2].mean()) < 0.03
+    body_edges = mesh_edges(anny_body.faces.numpy())
+    body_edges = body_edges[chest[body_edges].all(axis=1)]
+    assert largest_strain(body_rest, posed.vertices.numpy(), body_edges) > 0.3
+
+    rest = torch.as_tensor(dress.mesh.vertices, dtype=torch.float32)
+    moved = linear_blend_skinning(rest, torch.as_tensor(dress.skin_indices),
+                                  torch.as_tensor(dress.skin_weights, dtype=torch.float32),
+                                  posed.joint_transforms)
+    pinned = np.isin(np.arange(dress.mesh.num_vertices), dress.pinned)
+    edges = mesh_edges(dress.mesh.faces)
+    band_edges = edges[pinned[edges].all(axis=1)]
+    assert largest_strain(rest.numpy(), moved.numpy(), band_edges) < 0.01
+    collider = BodyCollider(posed.vertices, anny_body.faces)
+    for frame in range(motion.num_frames):
+        assert (collider.signed_distance(frame, moved[frame, dress.pinned]) > 0).all()
 
 
 def test_dress_hangs_from_the_chest_and_shipped_garments_pin_all_their_top_loops():

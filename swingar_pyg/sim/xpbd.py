@@ -61,10 +61,11 @@ from swingar_pyg.sim.recording import (
 )
 
 # Raise whenever a change alters simulated positions: dataset files record it, and the
-# datamodule warns when it trains on sequences an older simulator made. Revision 5: the
-# solver of revision 4, on procedural skirts and dresses whose rest shapes wrap the convex
-# hull of the body's cross-sections (revision 4's binned envelope put dresses inside chests).
-SIMULATOR_REVISION = 5
+# datamodule warns when it trains on sequences an older simulator made. Revision 6: the
+# solver of revision 4, on the garments of revision 5 (rest shapes that wrap the convex hull
+# of the body's cross-sections), whose pinned bands each move as one (revision 5's followed
+# anny's skin point by point, which stretched a dress's top edge by 40 % in a twist).
+SIMULATOR_REVISION = 6
 
 
 @dataclass(frozen=True)
