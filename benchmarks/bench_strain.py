@@ -45,7 +45,7 @@ from swingar_pyg.world.sequence import simulate_sequence  # noqa: E402
 
 MOTIONS = [("sway", 1.0), ("twist", 1.0), ("spin_stop", 1.0), ("walk", 1.0), ("jump", 1.0),
            ("kick", 0.7), ("kick", 1.0)]
-SETTINGS = [(50, 2), (100, 2), (50, 4)]
+SETTINGS = [(50, 2), (100, 1), (100, 2), (200, 1), (50, 4)]
 PERTURBATION = 1e-6  # metres
 
 
@@ -146,10 +146,22 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=3.0)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--jobs", type=int, default=2, help="worker processes, one thread each")
+    parser.add_argument("--settings", nargs="+", metavar="SxI",
+                        help="substeps x iterations to run (default: " +
+                        " ".join(f"{s}x{i}" for s, i in SETTINGS) + ")")
+    parser.add_argument("--motions", nargs="+", metavar="NAME[@AMPLITUDE]",
+                        help="motions to run (default: " +
+                        " ".join(f"{m}@{a:g}" for m, a in MOTIONS) + ")")
     parser.add_argument("--quick", action="store_true",
                         help="300 vertices, 1 s, walk and kick, 2 repeats")
     args = parser.parse_args()
-    motions = MOTIONS
+    motions = MOTIONS if not args.motions else [
+        (name, float(amplitude or 1.0)) for name, _, amplitude in
+        (m.partition("@") for m in args.motions)]
+    settings = SETTINGS if not args.settings else [
+        tuple(int(n) for n in s.lower().split("x")) for s in args.settings]
+    if any(len(s) != 2 for s in settings):
+        raise ValueError(f"--settings takes SUBSTEPSxITERATIONS, got {args.settings}")
     if args.quick:
         args.vertices, args.seconds, args.repeats = 300, 1.0, 2
         motions = [("walk", 1.0), ("kick", 1.0)]
@@ -157,7 +169,7 @@ def main() -> None:
         raise ValueError("--vertices must be >= 64, --seconds > 0, --repeats and --jobs >= 1")
 
     tasks = [(args.vertices, motion, amplitude, args.seconds, substeps, iterations, repeat)
-             for motion, amplitude in motions for substeps, iterations in SETTINGS
+             for motion, amplitude in motions for substeps, iterations in settings
              for repeat in range(args.repeats)]
     with ProcessPoolExecutor(args.jobs) as pool:
         runs = []
