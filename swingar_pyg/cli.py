@@ -182,7 +182,8 @@ def build_parser() -> argparse.ArgumentParser:
                                "angles at VBD's stiffness; distance: simulator revision 3's "
                                "opposite-corner constraints)")
     simulate.add_argument("--substeps", type=int, default=None,
-                          help="per frame (default: the solver's, XPBD 50, VBD 10)")
+                          help="per frame (default: the solver's, XPBD 50, VBD 10; the "
+                               "quickstart data use XPBD 100 x 1)")
     simulate.add_argument("--iterations", type=int, default=None,
                           help="per substep (default: the solver's, XPBD 2, VBD 10)")
     simulate.add_argument("--out", default="runs/simulate", help="output folder")
