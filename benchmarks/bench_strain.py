@@ -1,6 +1,6 @@
 """The ground-truth simulator's largest edge strain, by motion and solver setting.
 
-    OMP_NUM_THREADS=1 python benchmarks/bench_strain.py            # ~17 minutes, 2 processes
+    OMP_NUM_THREADS=1 python benchmarks/bench_strain.py            # ~27 minutes, 2 processes
     OMP_NUM_THREADS=1 python benchmarks/bench_strain.py --quick    # 300 vertices, 1 s, 2 motions
 
 Scene: a procedural knee-length skirt on the default anny body doing each motion of ``MOTIONS``
