@@ -11,11 +11,12 @@ Scene: a procedural knee-length skirt (``--vertices``) on the default anny body,
 setting, the datasets now use 100x1 and 200x1) and at the fine reference (100x4); newton's VBD
 solver (``pip install swingar-pyg[newton]``) at its default (10x10) and at a fine setting
 (20x20), with cloth-like bending and with very stiff bending; XPBD with dihedral bending at
-VBD's bending stiffness (``bending="dihedral"``). Each solver's own convergence error
-(default vs fine of the same solver) is set against the disagreement of the two fine solutions: if the second is much larger, the models, not the solves, decide where
-the cloth goes, and no estimator can be said to be closer to the truth than that. Also
-recorded: cost, largest strain, share of vertices inside the body, and how far the hem hangs
-from the body axis (a flared skirt's flare is where the two models differ).
+VBD's bending stiffness (``bending="dihedral"``). Each solver's own convergence error (default
+vs fine of the same solver) is set against the disagreement of the two fine solutions: if the
+second is much larger, the models, not the solves, decide where the cloth goes, and no
+estimator can be said to be closer to the truth than that. Also recorded: cost, largest strain,
+share of vertices inside the body, and how far the hem hangs from the body axis (a flared
+skirt's flare is where the two models differ).
 
 Writes ``benchmarks/results/<--name>.json`` and ``.png`` (default ``bench_sim_crosscheck``);
 ``--runs`` keeps some of the runs, and the comparisons between them.
