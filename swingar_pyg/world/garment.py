@@ -302,15 +302,13 @@ def transfer_skinning(mesh: Mesh, pinned: np.ndarray, body_vertices: np.ndarray,
     stretched as much (a dress's top edge by 40 %, measured), which no cloth does."""
     nearest = cKDTree(body_vertices).query(mesh.vertices)[1]
     indices, weights = skin_indices[nearest].copy(), skin_weights[nearest].astype(np.float64)
-    joints, per_vertex = len(joint_names), indices.shape[1]
-    torso = sorted(set(range(joints)) - set(joints_named(joint_names, _LIMB_WORDS)))
-    dense = np.zeros((len(pinned), joints))
+    dense = np.zeros((len(pinned), len(joint_names)))
     np.add.at(dense, (np.arange(len(pinned))[:, None], indices[pinned]), weights[pinned])
-    dense[:, np.setdiff1d(np.arange(joints), torso)] = 0.0
+    dense[:, joints_named(joint_names, _LIMB_WORDS)] = 0.0  # the torso's joints only
     dense[dense.sum(axis=1) == 0, 0] = 1.0
     for band in pin_bands(mesh, pinned):
         mean = dense[band].mean(axis=0)
-        chosen = np.argsort(-mean, kind="stable")[:per_vertex]
+        chosen = np.argsort(-mean, kind="stable")[:indices.shape[1]]
         indices[pinned[band]] = chosen
         weights[pinned[band]] = mean[chosen] / mean[chosen].sum()
     return indices, weights
@@ -319,17 +317,26 @@ def transfer_skinning(mesh: Mesh, pinned: np.ndarray, body_vertices: np.ndarray,
 def pin_bands(mesh: Mesh, pinned: np.ndarray) -> list[np.ndarray]:
     """The pinned vertices in bands: positions in ``pinned`` of each connected piece of
     the graph of mesh edges with both ends pinned (a pin on its own is a band)."""
+    return _connected_pieces(mesh_edges(mesh.faces), pinned, mesh.num_vertices)
+
+
+def _connected_pieces(edges: np.ndarray, vertices: np.ndarray,
+                      num_vertices: int) -> list[np.ndarray]:
+    """Positions in ``vertices`` of each connected piece of the graph they form with
+    those ``edges`` whose ends both lie among them."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
-    position = np.full(mesh.num_vertices, -1)
-    position[pinned] = np.arange(len(pinned))
-    edges = position[mesh_edges(mesh.faces)]
-    edges = edges[(edges >= 0).all(axis=1)]
-    graph = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])),
-                       shape=(len(pinned), len(pinned)))
+    if not len(vertices):
+        return []
+    position = np.full(num_vertices, -1)
+    position[vertices] = np.arange(len(vertices))
+    ends = position[edges]
+    ends = ends[(ends >= 0).all(axis=1)]
+    graph = coo_matrix((np.ones(len(ends)), (ends[:, 0], ends[:, 1])),
+                       shape=(len(vertices), len(vertices)))
     _, label = connected_components(graph, directed=False)
-    return [np.flatnonzero(label == k) for k in range(label.max() + 1)] if len(pinned) else []
+    return [np.flatnonzero(label == k) for k in range(label.max() + 1)]
 
 
 def _interpolate_rings(radius: np.ndarray, ring_position: np.ndarray,
@@ -352,17 +359,12 @@ def top_boundary_loops(mesh: Mesh, band: float = 0.1) -> np.ndarray:
     """Vertices of the mesh's boundary loops whose mean height lies within ``band``
     of the highest one's: a waistband, a neckline, or the top edge of a bib and
     the ends of its straps."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
     boundary = boundary_edges(mesh.faces)
     if not len(boundary):
         raise ValueError("the garment has no boundary to attach to the body")
-    n = mesh.num_vertices
-    graph = coo_matrix((np.ones(len(boundary)), (boundary[:, 0], boundary[:, 1])), shape=(n, n))
-    _, label = connected_components(graph, directed=False)
     on_boundary = np.unique(boundary)
-    loops = [on_boundary[label[on_boundary] == k] for k in np.unique(label[on_boundary])]
+    loops = [on_boundary[piece]
+             for piece in _connected_pieces(boundary, on_boundary, mesh.num_vertices)]
     heights = [mesh.vertices[loop, 2].mean() for loop in loops]
     top = max(heights)
     return np.sort(np.concatenate([loop for loop, z in zip(loops, heights) if z >= top - band]))
