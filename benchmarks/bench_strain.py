@@ -2,8 +2,10 @@
 
     OMP_NUM_THREADS=1 python benchmarks/bench_strain.py            # ~27 minutes, 2 processes
     OMP_NUM_THREADS=1 python benchmarks/bench_strain.py --quick    # 300 vertices, 1 s, 2 motions
+    OMP_NUM_THREADS=1 python benchmarks/bench_strain.py --jitter 0.3  # irregular triangulation
 
-Scene: a procedural knee-length skirt on the default anny body doing each motion of ``MOTIONS``
+Scene: a procedural knee-length skirt (a quad grid, or with ``--jitter`` an irregular
+triangulation as in the datasets) on the default anny body doing each motion of ``MOTIONS``
 for ``--seconds`` (the kick at the datasets' amplitude, 0.7 = 45 degrees, and at 1.0 = 65).
 One run's largest strain is not a stable figure: the swinging cloth is chaotic, and moving the
 garment by a micrometre (or running on another CPU, whose float rounding differs) moves the
@@ -17,7 +19,8 @@ value, which XPBD's distance constraints resist as they resist stretch, where a 
 would buckle); also the 99.9th percentile of :math:`|l / L - 1|` over edges and frames, the
 median wall time per frame, and the largest share of vertices inside the body.
 
-Writes ``benchmarks/results/bench_strain.json`` and ``bench_strain.png``.
+Writes ``benchmarks/results/bench_strain.json`` and ``bench_strain.png`` (``bench_strain_jitter``
+with ``--jitter``), with the simulator revision that made them.
 """
 
 from __future__ import annotations
@@ -37,6 +40,7 @@ from common import machine_info, perturbed, write_results  # noqa: E402
 
 from swingar_pyg.geometry.mesh import mesh_edges  # noqa: E402
 from swingar_pyg.sim import STRETCH_BAR, XPBDSettings  # noqa: E402
+from swingar_pyg.sim.xpbd import SIMULATOR_REVISION  # noqa: E402
 from swingar_pyg.sim.recording import signed_edge_strain  # noqa: E402
 from swingar_pyg.world.body import AnnyBody  # noqa: E402
 from swingar_pyg.world.garment import SkirtSpec, fit_procedural_skirt  # noqa: E402
@@ -55,13 +59,13 @@ def _body() -> AnnyBody:
     return AnnyBody()
 
 
-def run(vertices: int, motion: str, amplitude: float, seconds: float, substeps: int,
-        iterations: int, repeat: int) -> dict:
+def run(vertices: int, jitter: float, motion: str, amplitude: float, seconds: float,
+        substeps: int, iterations: int, repeat: int) -> dict:
     """One simulated sequence and its strain figures."""
     body = _body()
     shape = body.default_shape()
-    garment = perturbed(fit_procedural_skirt(SkirtSpec(vertices=vertices), body, shape),
-                        PERTURBATION, seed=repeat)
+    spec = SkirtSpec(vertices=vertices, jitter=jitter)
+    garment = perturbed(fit_procedural_skirt(spec, body, shape), PERTURBATION, seed=repeat)
     sequence = procedural_motion(motion, body.joint_names, seconds=seconds, amplitude=amplitude)
     settings = XPBDSettings(fps=sequence.fps, substeps=substeps, iterations=iterations)
     result = simulate_sequence(body, shape, garment, sequence, settings).result
@@ -143,6 +147,8 @@ def plot(rows: list[dict]):
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--vertices", type=int, default=1500)
+    parser.add_argument("--jitter", type=float, default=0.0,
+                        help="irregular triangulation: SkirtSpec jitter (0 = quad grid)")
     parser.add_argument("--seconds", type=float, default=3.0)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--jobs", type=int, default=2, help="worker processes, one thread each")
@@ -168,7 +174,7 @@ def main() -> None:
     if args.vertices < 64 or args.seconds <= 0 or args.repeats < 1 or args.jobs < 1:
         raise ValueError("--vertices must be >= 64, --seconds > 0, --repeats and --jobs >= 1")
 
-    tasks = [(args.vertices, motion, amplitude, args.seconds, substeps, iterations, repeat)
+    tasks = [(args.vertices, args.jitter, motion, amplitude, args.seconds, substeps, iterations, repeat)
              for motion, amplitude in motions for substeps, iterations in settings
              for repeat in range(args.repeats)]
     with ProcessPoolExecutor(args.jobs) as pool:
@@ -181,9 +187,11 @@ def main() -> None:
                   f" %, p99.9 {100 * r['p999_strain']:4.2f} %, inside "
                   f"{100 * r['max_penetration']:.2f} %", flush=True)
     rows = summarise(runs)
-    payload = {"machine": machine_info(), "vertices": args.vertices, "seconds": args.seconds,
+    payload = {"machine": machine_info(), "simulator_revision": SIMULATOR_REVISION,
+               "vertices": args.vertices, "jitter": args.jitter, "seconds": args.seconds,
                "perturbation_m": PERTURBATION, "jobs": args.jobs, "rows": rows, "runs": runs}
-    path = write_results("bench_strain" + ("_quick" if args.quick else ""), payload, plot(rows))
+    stem = "bench_strain" + ("_jitter" if args.jitter else "") + ("_quick" if args.quick else "")
+    path = write_results(stem, payload, plot(rows))
     print(f"wrote {path} and its .png")
 
 
