@@ -198,9 +198,9 @@ def test_skirt_swings_on_a_walking_body_without_stretch_or_penetration(anny_body
     # Walking swings the thighs into the skirt: the case that once pushed cloth
     # through a leg (contacts paired against the body's end-of-frame pose).
     motion = procedural_motion('walk', anny_body.joint_names, seconds=2.0)
-    # At 100 substeps (configs/data/full.yaml's) a walk's largest stretch is 4-8 % whatever
-    # micrometre the garment is moved by (benchmarks/bench_strain.py); at 50 it is chaotic,
-    # 7-15 % on this skirt.
+    # At 100 substeps (configs/data/quickstart.yaml's) this walk's largest stretch is 3-6 %
+    # whatever micrometre the garment is moved by (simulator revision 7); at 50 it is
+    # chaotic, 5-20 % on this skirt.
     settings = XPBDSettings(settle_frames=5, substeps=100)
     sequence = simulate_sequence(anny_body, shape, garment, motion, settings)
     result, skinned = sequence.result, sequence.rigid
