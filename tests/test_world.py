@@ -143,7 +143,9 @@ def test_signed_distance_to_surface_matches_a_sphere():
 
 @pytest.mark.parametrize('kwargs, message', [({'length': 3.0}, 'length'),
                                              ({'flare': 1.0}, 'flare'),
-                                             ({'vertices': 10}, 'at least 64')])
+                                             ({'vertices': 10}, 'at least 64'),
+                                             ({'jitter': -0.1}, 'jitter'),
+                                             ({'jitter': 0.5}, 'jitter')])
 def test_skirt_spec_validation(kwargs, message):
     with pytest.raises(ValueError, match=message):
         SkirtSpec(**kwargs)

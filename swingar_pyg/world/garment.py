@@ -33,6 +33,12 @@ def topology_tag(jitter: float) -> str:
     return "irregular" if jitter > 0 else "grid"
 
 
+def check_jitter(jitter: float) -> None:
+    """Raises ``ValueError`` unless a procedural garment's jitter lies in [0, 0.4]."""
+    if not 0.0 <= jitter <= 0.4:
+        raise ValueError(f"jitter must be in [0, 0.4], got {jitter}")
+
+
 def dominant_joints(skin_indices: np.ndarray, skin_weights: np.ndarray) -> np.ndarray:
     """Each vertex's most weighted joint."""
     return skin_indices[np.arange(len(skin_indices)), np.argmax(skin_weights, axis=1)]
@@ -99,6 +105,7 @@ class SkirtSpec:
             raise ValueError(f"flare must be in [0, 1), got {self.flare}")
         if self.vertices < 64:
             raise ValueError(f"a skirt needs at least 64 vertices, got {self.vertices}")
+        check_jitter(self.jitter)
 
     @property
     def name(self) -> str:

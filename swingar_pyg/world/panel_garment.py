@@ -36,6 +36,7 @@ from swingar_pyg.world.body import BodyModel, rest_pose
 from swingar_pyg.world.garment import (
     ARM_BONE_WORDS,
     Garment,
+    check_jitter,
     dominant_joints,
     garment_on_body,
     joints_named,
@@ -122,8 +123,7 @@ def _check(spec, **ranges: tuple[float, float]) -> None:
                              f"got {value}")
     if spec.vertices < 200:
         raise ValueError(f"a sewn garment needs at least 200 vertices, got {spec.vertices}")
-    if not 0.0 <= spec.jitter <= 0.4:
-        raise ValueError(f"jitter must be in [0, 0.4], got {spec.jitter}")
+    check_jitter(spec.jitter)
     if not 0.0 < spec.clearance <= 0.1:
         raise ValueError(f"clearance must be in (0, 0.1] m, got {spec.clearance}")
 
