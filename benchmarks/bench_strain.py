@@ -39,8 +39,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import machine_info, perturbed, write_results  # noqa: E402
 
 from swingar_pyg.geometry.mesh import mesh_edges  # noqa: E402
-from swingar_pyg.sim import STRETCH_BAR, XPBDSettings  # noqa: E402
-from swingar_pyg.sim.xpbd import SIMULATOR_REVISION  # noqa: E402
+from swingar_pyg.sim import SIMULATOR_REVISION, STRETCH_BAR, XPBDSettings  # noqa: E402
 from swingar_pyg.sim.recording import signed_edge_strain  # noqa: E402
 from swingar_pyg.world.body import AnnyBody  # noqa: E402
 from swingar_pyg.world.garment import SkirtSpec, fit_procedural_skirt  # noqa: E402
@@ -174,7 +173,8 @@ def main() -> None:
     if args.vertices < 64 or args.seconds <= 0 or args.repeats < 1 or args.jobs < 1:
         raise ValueError("--vertices must be >= 64, --seconds > 0, --repeats and --jobs >= 1")
 
-    tasks = [(args.vertices, args.jitter, motion, amplitude, args.seconds, substeps, iterations, repeat)
+    tasks = [(args.vertices, args.jitter, motion, amplitude, args.seconds, substeps, iterations,
+              repeat)
              for motion, amplitude in motions for substeps, iterations in settings
              for repeat in range(args.repeats)]
     with ProcessPoolExecutor(args.jobs) as pool:
