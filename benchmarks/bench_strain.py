@@ -19,8 +19,15 @@ value, which XPBD's distance constraints resist as they resist stretch, where a 
 would buckle); also the 99.9th percentile of :math:`|l / L - 1|` over edges and frames, the
 median wall time per frame, and the largest share of vertices inside the body.
 
+Each run also splits its largest stretch by where it happens (``stretch_by_place``): within two
+edges of the pins (the rows carrying the skirt and the waistband's pull), touching the body
+(an end within 1 cm of it) and free cloth, since the remedies differ: iterations for the
+first, the contact model for the second. ``--length`` and ``--flare`` choose another skirt
+(the quickstart's narrow long one is ``--length 0.75 --flare 0.15``).
+
 Writes ``benchmarks/results/bench_strain.json`` and ``bench_strain.png`` (``bench_strain_jitter``
-with ``--jitter``), with the simulator revision that made them.
+with ``--jitter``, ``bench_strain_l0.75_f0.15`` for another skirt), with the simulator revision
+that made them.
 """
 
 from __future__ import annotations
@@ -33,6 +40,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from scipy.spatial import cKDTree
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
@@ -40,7 +48,7 @@ from common import machine_info, perturbed, write_results  # noqa: E402
 
 from swingar_pyg.geometry.mesh import mesh_edges  # noqa: E402
 from swingar_pyg.sim import SIMULATOR_REVISION, STRETCH_BAR, XPBDSettings  # noqa: E402
-from swingar_pyg.sim.recording import signed_edge_strain  # noqa: E402
+from swingar_pyg.sim.recording import signed_edge_strain, stretch_by_place  # noqa: E402
 from swingar_pyg.world.body import AnnyBody  # noqa: E402
 from swingar_pyg.world.garment import SkirtSpec, fit_procedural_skirt  # noqa: E402
 from swingar_pyg.world.motion import procedural_motion  # noqa: E402
@@ -50,6 +58,7 @@ MOTIONS = [("sway", 1.0), ("twist", 1.0), ("spin_stop", 1.0), ("walk", 1.0), ("j
            ("kick", 0.7), ("kick", 1.0)]
 SETTINGS = [(50, 2), (100, 1), (100, 2), (200, 1), (50, 4)]
 PERTURBATION = 1e-6  # metres
+PLACES = ("near_pins", "touching", "free")  # see stretch_by_place
 
 
 @lru_cache(maxsize=1)
@@ -58,24 +67,31 @@ def _body() -> AnnyBody:
     return AnnyBody()
 
 
-def run(vertices: int, jitter: float, motion: str, amplitude: float, seconds: float,
-        substeps: int, iterations: int, repeat: int) -> dict:
+def run(vertices: int, jitter: float, length: float, flare: float, motion: str,
+        amplitude: float, seconds: float, substeps: int, iterations: int, repeat: int) -> dict:
     """One simulated sequence and its strain figures."""
     body = _body()
     shape = body.default_shape()
-    spec = SkirtSpec(vertices=vertices, jitter=jitter)
+    spec = SkirtSpec(length=length, flare=flare, vertices=vertices, jitter=jitter)
     garment = perturbed(fit_procedural_skirt(spec, body, shape), PERTURBATION, seed=repeat)
     sequence = procedural_motion(motion, body.joint_names, seconds=seconds, amplitude=amplitude)
     settings = XPBDSettings(fps=sequence.fps, substeps=substeps, iterations=iterations)
-    result = simulate_sequence(body, shape, garment, sequence, settings).result
+    simulated = simulate_sequence(body, shape, garment, sequence, settings)
+    result = simulated.result
     edges = torch.as_tensor(mesh_edges(garment.mesh.faces))
     rest = torch.as_tensor(garment.mesh.vertices, dtype=torch.float32)
     rest_length = (rest[edges[:, 0]] - rest[edges[:, 1]]).norm(dim=-1)
     strain = signed_edge_strain(result.positions, edges, rest_length)
+    body_distance = torch.as_tensor(np.stack([
+        cKDTree(skin.numpy()).query(cloth.numpy())[0]
+        for skin, cloth in zip(simulated.body_vertices, result.positions)]))
+    places = stretch_by_place(strain, edges, garment.pinned, garment.mesh.num_vertices,
+                              body_distance)
     return {"motion": motion, "amplitude": amplitude, "substeps": substeps,
             "iterations": iterations, "repeat": repeat,
             "ms_per_frame": 1e3 * float(np.median(result.seconds_per_frame)),
             "max_stretch": float(strain.max()), "max_compression": float(-strain.min()),
+            **{f"max_stretch_{place}": value for place, value in places.items()},
             "p999_strain": float(strain.abs().flatten().quantile(0.999)),
             "mean_strain": float(strain.abs().mean()),
             "max_penetration": float(np.nanmax(result.penetration))}
@@ -92,7 +108,8 @@ def summarise(runs: list[dict]) -> list[dict]:
         row = {"motion": motion, "amplitude": amplitude, "substeps": substeps,
                "iterations": iterations, "repeats": len(group)}
         for key in ("ms_per_frame", "max_stretch", "max_compression", "p999_strain",
-                    "mean_strain", "max_penetration"):
+                    "mean_strain", "max_penetration", *(f"max_stretch_{place}" for place in
+                                                       PLACES)):
             values = np.array([r[key] for r in group])
             row[key] = {"median": float(np.median(values)), "min": float(values.min()),
                         "max": float(values.max())}
@@ -148,6 +165,10 @@ def main() -> None:
     parser.add_argument("--vertices", type=int, default=1500)
     parser.add_argument("--jitter", type=float, default=0.0,
                         help="irregular triangulation: SkirtSpec jitter (0 = quad grid)")
+    parser.add_argument("--length", type=float, default=SkirtSpec.length,
+                        help="skirt length, m")
+    parser.add_argument("--flare", type=float, default=SkirtSpec.flare,
+                        help="how far the hem stands out: sine of the cone's half-angle")
     parser.add_argument("--seconds", type=float, default=3.0)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--jobs", type=int, default=2, help="worker processes, one thread each")
@@ -173,7 +194,7 @@ def main() -> None:
     if args.vertices < 64 or args.seconds <= 0 or args.repeats < 1 or args.jobs < 1:
         raise ValueError("--vertices must be >= 64, --seconds > 0, --repeats and --jobs >= 1")
 
-    tasks = [(args.vertices, args.jitter, motion, amplitude, args.seconds, substeps, iterations,
+    tasks = [(args.vertices, args.jitter, args.length, args.flare, motion, amplitude, args.seconds, substeps, iterations,
               repeat)
              for motion, amplitude in motions for substeps, iterations in settings
              for repeat in range(args.repeats)]
@@ -185,12 +206,18 @@ def main() -> None:
                   f"#{r['repeat']}: {r['ms_per_frame']:6.1f} ms/frame, stretch "
                   f"{100 * r['max_stretch']:5.1f} %, compression {100 * r['max_compression']:5.1f}"
                   f" %, p99.9 {100 * r['p999_strain']:4.2f} %, inside "
-                  f"{100 * r['max_penetration']:.2f} %", flush=True)
+                  f"{100 * r['max_penetration']:.2f} %; stretch near pins / touching / free "
+                  + " / ".join(f"{100 * r['max_stretch_' + p]:.1f}" for p in PLACES) + " %",
+                  flush=True)
     rows = summarise(runs)
     payload = {"machine": machine_info(), "simulator_revision": SIMULATOR_REVISION,
-               "vertices": args.vertices, "jitter": args.jitter, "seconds": args.seconds,
+               "vertices": args.vertices, "jitter": args.jitter, "length": args.length,
+               "flare": args.flare, "seconds": args.seconds,
                "perturbation_m": PERTURBATION, "jobs": args.jobs, "rows": rows, "runs": runs}
-    stem = "bench_strain" + ("_jitter" if args.jitter else "") + ("_quick" if args.quick else "")
+    shape = ("" if (args.length, args.flare) == (SkirtSpec.length, SkirtSpec.flare)
+             else f"_l{args.length:g}_f{args.flare:g}")
+    stem = ("bench_strain" + ("_jitter" if args.jitter else "") + shape
+            + ("_quick" if args.quick else ""))
     path = write_results(stem, payload, plot(rows))
     print(f"wrote {path} and its .png")
 

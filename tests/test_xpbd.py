@@ -6,6 +6,7 @@ import trimesh
 from swingar_pyg.geometry import as_mesh, sheet
 from swingar_pyg.sim import BodyCollider, XPBDCloth, XPBDSettings
 from swingar_pyg.sim.constraints import bending_pairs, distance_constraints, stretch_pairs
+from swingar_pyg.sim.recording import stretch_by_place
 
 
 def hanging_sheet(rows=8, cols=8, size=0.4):
@@ -161,3 +162,19 @@ def test_a_fast_body_pushes_cloth_ahead_instead_of_passing_through(settings):
         assert (cloth - centre).norm(dim=-1).min() > radius - 0.001  # never inside
         contacts += int(in_silhouette.sum())
     assert contacts > 0
+
+
+def test_stretch_by_place_takes_the_largest_stretch_of_each_place():
+    # a chain 0-1-2-3-4-5 pinned at 0; at frame 1 vertex 3 touches the body
+    pairs = torch.tensor([[0, 1], [1, 2], [2, 3], [3, 4], [4, 5]])
+    strain = torch.tensor([[0.01, 0.03, 0.02, 0.05, 0.07],
+                           [0.02, -0.09, 0.04, 0.06, 0.01]])
+    body_distance = torch.full((2, 6), 0.5)
+    body_distance[1, 3] = 0.005
+    places = stretch_by_place(strain, pairs, np.array([0]), 6, body_distance, pin_hops=1)
+    # edges (0,1) and (1,2) are near the pins; (2,3) and (3,4) touch at frame 1 only
+    assert places == pytest.approx({"near_pins": 0.03, "touching": 0.06, "free": 0.07})
+    unpinned = stretch_by_place(-strain.abs(), pairs, np.array([], dtype=int), 6, body_distance)
+    assert unpinned == {"near_pins": 0.0, "touching": 0.0, "free": 0.0}  # compression only
+    with pytest.raises(ValueError, match="do not agree"):
+        stretch_by_place(strain, pairs, np.array([0]), 6, body_distance[:, :5])
