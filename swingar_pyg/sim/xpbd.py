@@ -273,6 +273,12 @@ class XPBDCloth:
 
     def _collide(self, p: Tensor, x: Tensor, track: ContactTrack, fraction: float,
                  body_step: Tensor, thickness: float) -> None:
+        r"""Pushes each free vertex behind its contact plane out onto it,
+        :math:`p \mathrel{+}= \max(0, h - (p - b) \cdot n)\, n`, and removes its slip
+        against the body up to ``friction`` times that push. The velocity update
+        :math:`v = (p - x) / \Delta t` turns a push of depth :math:`d` into :math:`d /
+        \Delta t` away from the body, so a vertex found deep inside leaves fast (README,
+        "Contacts push out with velocity", for the remedies measured)."""
         point, normal = track.planes(fraction)
         depth = ((p - point) * normal).sum(-1) - thickness
         push_depth = torch.where((depth < 0) & self.free, -depth, 0.0)
