@@ -19,10 +19,10 @@ value, which XPBD's distance constraints resist as they resist stretch, where a 
 would buckle); also the 99.9th percentile of :math:`|l / L - 1|` over edges and frames, the
 median wall time per frame, and the largest share of vertices inside the body.
 
-Each run also splits its largest stretch by where it happens (``stretch_by_place``): within two
-edges of the pins (the rows carrying the skirt and the waistband's pull), touching the body
-(an end within 1 cm of it) and free cloth, since the remedies differ: iterations for the
-first, the contact model for the second. ``--length`` and ``--flare`` choose another skirt
+Each run also splits its largest stretch by where it happens (``sequence_stretch_by_place``):
+within two edges of the pins (the rows carrying the skirt and the waistband's pull), touching
+the body (an end within 1 cm of it) and free cloth, since the remedies differ: iterations for
+the first, the contact model for the second. ``--length`` and ``--flare`` choose another skirt
 (the quickstart's narrow long one is ``--length 0.75 --flare 0.15``).
 
 Writes ``benchmarks/results/bench_strain.json`` and ``bench_strain.png`` (``bench_strain_jitter``
@@ -40,7 +40,6 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from scipy.spatial import cKDTree
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
@@ -48,7 +47,10 @@ from common import machine_info, perturbed, write_results  # noqa: E402
 
 from swingar_pyg.geometry.mesh import mesh_edges  # noqa: E402
 from swingar_pyg.sim import SIMULATOR_REVISION, STRETCH_BAR, XPBDSettings  # noqa: E402
-from swingar_pyg.sim.recording import signed_edge_strain, stretch_by_place  # noqa: E402
+from swingar_pyg.sim.recording import (  # noqa: E402
+    sequence_stretch_by_place,
+    signed_edge_strain,
+)
 from swingar_pyg.world.body import AnnyBody  # noqa: E402
 from swingar_pyg.world.garment import SkirtSpec, fit_procedural_skirt  # noqa: E402
 from swingar_pyg.world.motion import procedural_motion  # noqa: E402
@@ -82,11 +84,8 @@ def run(vertices: int, jitter: float, length: float, flare: float, motion: str,
     rest = torch.as_tensor(garment.mesh.vertices, dtype=torch.float32)
     rest_length = (rest[edges[:, 0]] - rest[edges[:, 1]]).norm(dim=-1)
     strain = signed_edge_strain(result.positions, edges, rest_length)
-    body_distance = torch.as_tensor(np.stack([
-        cKDTree(skin.numpy()).query(cloth.numpy())[0]
-        for skin, cloth in zip(simulated.body_vertices, result.positions)]))
-    places = stretch_by_place(strain, edges, garment.pinned, garment.mesh.num_vertices,
-                              body_distance)
+    places = sequence_stretch_by_place(garment.mesh, garment.pinned, result.positions,
+                                       simulated.body_vertices)
     return {"motion": motion, "amplitude": amplitude, "substeps": substeps,
             "iterations": iterations, "repeat": repeat,
             "ms_per_frame": 1e3 * float(np.median(result.seconds_per_frame)),

@@ -102,6 +102,10 @@ def _make_dataset(args: argparse.Namespace) -> int:
               f"{100 * sim['share_over_stretch_bar']:.0f} % of sequences above "
               f"{100 * STRETCH_BAR:g} %), largest share of vertices inside the "
               f"body {100 * sim['max_penetration']:.2f} %")
+        places = sim["over_stretch_bar_by_place"]
+        if places:
+            print("  where those above it stretch most: " + ", ".join(
+                f"{place.replace('_', ' ')} {count}" for place, count in places.items()))
     return 0
 
 

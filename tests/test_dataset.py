@@ -81,6 +81,9 @@ def test_generation_resumes_and_merges(tmp_path):
     assert np.isclose(first['simulation']['max_stretch_median_sequence'], np.median(largest))
     assert np.isclose(first['simulation']['share_over_stretch_bar'],
                       np.mean(np.array(largest) > STRETCH_BAR))
+    places = first['simulation']['over_stretch_bar_by_place']
+    assert set(places) <= {'near_pins', 'touching', 'free'}
+    assert sum(places.values()) == np.sum(np.array(largest) > STRETCH_BAR)
     # A killed run leaves some parts; only the missing ones are simulated again.
     (output / 'parts' / 'train' / 'train-00001.h5').unlink()
     (output / 'train.h5').unlink()

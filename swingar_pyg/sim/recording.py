@@ -4,6 +4,7 @@ solved it."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
@@ -11,6 +12,9 @@ from torch import Tensor
 
 from swingar_pyg.sim.collider import BodyCollider
 from swingar_pyg.sim.constraints import DistanceConstraints
+
+if TYPE_CHECKING:
+    from swingar_pyg.geometry.mesh import Mesh
 
 
 # The largest edge stretch issue #3 asks of a simulated sequence (benchmarks/bench_strain.py
@@ -151,3 +155,25 @@ def stretch_by_place(strain: Tensor, pairs: Tensor, pinned: np.ndarray, num_vert
               "free": ~(near_pins | touching)}
     return {name: float(torch.where(mask, stretch, 0.0).max()) if strain.numel() else 0.0
             for name, mask in places.items()}
+
+
+def sequence_stretch_by_place(mesh: "Mesh", pinned: np.ndarray, positions: Tensor,
+                              body_vertices: Tensor) -> dict[str, float]:
+    """:func:`stretch_by_place` of a simulated sequence: the garment ``mesh`` (its
+    rest lengths) and ``pinned`` vertices, cloth ``positions`` ``(T, N, 3)`` and the body
+    ``body_vertices`` ``(T, V, 3)`` (distance to the body: to its nearest vertex)."""
+    from scipy.spatial import cKDTree
+
+    from swingar_pyg.geometry.mesh import mesh_edges
+
+    if positions.shape[0] != body_vertices.shape[0]:
+        raise ValueError(f"the cloth has {positions.shape[0]} frames, the body "
+                         f"{body_vertices.shape[0]}")
+    pairs = torch.as_tensor(mesh_edges(mesh.faces))
+    rest = torch.as_tensor(mesh.vertices, dtype=positions.dtype)
+    rest_lengths = (rest[pairs[:, 0]] - rest[pairs[:, 1]]).norm(dim=-1)
+    strain = signed_edge_strain(positions.cpu(), pairs, rest_lengths)
+    distance = torch.as_tensor(np.stack([
+        cKDTree(body.detach().cpu().numpy()).query(cloth.detach().cpu().numpy())[0]
+        for body, cloth in zip(body_vertices, positions)]), dtype=strain.dtype)
+    return stretch_by_place(strain, pairs, pinned, mesh.num_vertices, distance)

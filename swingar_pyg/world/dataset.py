@@ -14,6 +14,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import time
+from collections import Counter
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from multiprocessing import get_context
@@ -23,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from swingar_pyg.atomic import atomic_path
-from swingar_pyg.sim.recording import STRETCH_BAR
+from swingar_pyg.sim.recording import STRETCH_BAR, sequence_stretch_by_place
 from swingar_pyg.sim.xpbd import XPBDSettings
 from swingar_pyg.world.garment import garment_spec
 from swingar_pyg.world.sequence_file import merge_sequence_files, write_sequences
@@ -138,9 +139,11 @@ def _run_job(job: Job, fps: float, seconds: float, solver: XPBDSettings, part: s
     sequence = sequence.with_exact_penetration(body.faces)
     write_sequences(part, [sequence], ids=[job.id])
     result = sequence.result
+    places = sequence_stretch_by_place(garment.mesh, garment.pinned, result.positions,
+                                       sequence.body_vertices)
     return {"id": job.id, "vertices": garment.mesh.num_vertices, "frames": motion.num_frames,
             "ms_per_frame": 1e3 * float(np.median(result.seconds_per_frame)),
-            "max_stretch": float(result.max_stretch.max()),
+            "max_stretch": float(result.max_stretch.max()), "max_stretch_by_place": places,
             "max_penetration": float(np.nanmax(result.penetration)),
             "max_penetration_exact": float(sequence.penetration_exact.max())}
 
@@ -211,6 +214,10 @@ def make_dataset(config: DatasetConfig, output: str | Path | None = None,
             # sequences spread says more than the worst of them.
             "max_stretch_median_sequence": float(np.median(largest)),
             "share_over_stretch_bar": float((largest > STRETCH_BAR).mean()),
+            # where the sequences over the bar have their largest stretch (stretch_by_place)
+            "over_stretch_bar_by_place": dict(Counter(
+                max(r["max_stretch_by_place"], key=r["max_stretch_by_place"].get)
+                for r in reports if r["max_stretch"] > STRETCH_BAR)),
             "max_penetration": float(max(r["max_penetration"] for r in reports)),
             "max_penetration_exact": float(max(r["max_penetration_exact"] for r in reports))}
     with atomic_path(output / f"summary-shard{index}of{count}.json") as tmp:
