@@ -19,7 +19,7 @@ value, which XPBD's distance constraints resist as they resist stretch, where a 
 would buckle); also the 99.9th percentile of :math:`|l / L - 1|` over edges and frames, the
 median wall time per frame, and the largest share of vertices inside the body.
 
-Each run also splits its largest stretch by where it happens (``sequence_stretch_by_place``):
+Each run also splits its largest stretch by where it happens (``stretch_by_place``):
 within two edges of the pins (the rows carrying the skirt and the waistband's pull), touching
 the body (an end within 1 cm of it) and free cloth, since the remedies differ: iterations for
 the first, the contact model for the second. ``--length`` and ``--flare`` choose another skirt
@@ -45,11 +45,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from common import machine_info, perturbed, write_results  # noqa: E402
 
-from swingar_pyg.geometry.mesh import mesh_edges  # noqa: E402
 from swingar_pyg.sim import SIMULATOR_REVISION, STRETCH_BAR, XPBDSettings  # noqa: E402
 from swingar_pyg.sim.recording import (  # noqa: E402
-    sequence_stretch_by_place,
-    signed_edge_strain,
+    garment_edge_strain,
+    nearest_body_distance,
+    stretch_by_place,
 )
 from swingar_pyg.world.body import AnnyBody  # noqa: E402
 from swingar_pyg.world.garment import SkirtSpec, fit_procedural_skirt  # noqa: E402
@@ -60,7 +60,7 @@ MOTIONS = [("sway", 1.0), ("twist", 1.0), ("spin_stop", 1.0), ("walk", 1.0), ("j
            ("kick", 0.7), ("kick", 1.0)]
 SETTINGS = [(50, 2), (100, 1), (100, 2), (200, 1), (50, 4)]
 PERTURBATION = 1e-6  # metres
-PLACES = ("near_pins", "touching", "free")  # see stretch_by_place
+PLACES = ("near_pins", "touching", "free")  # the keys of stretch_by_place
 
 
 @lru_cache(maxsize=1)
@@ -80,12 +80,9 @@ def run(vertices: int, jitter: float, length: float, flare: float, motion: str,
     settings = XPBDSettings(fps=sequence.fps, substeps=substeps, iterations=iterations)
     simulated = simulate_sequence(body, shape, garment, sequence, settings)
     result = simulated.result
-    edges = torch.as_tensor(mesh_edges(garment.mesh.faces))
-    rest = torch.as_tensor(garment.mesh.vertices, dtype=torch.float32)
-    rest_length = (rest[edges[:, 0]] - rest[edges[:, 1]]).norm(dim=-1)
-    strain = signed_edge_strain(result.positions, edges, rest_length)
-    places = sequence_stretch_by_place(garment.mesh, garment.pinned, result.positions,
-                                       simulated.body_vertices)
+    edges, strain = garment_edge_strain(garment.mesh, result.positions)
+    places = stretch_by_place(strain, edges, garment.pinned, garment.mesh.num_vertices,
+                              nearest_body_distance(result.positions, simulated.body_vertices))
     return {"motion": motion, "amplitude": amplitude, "substeps": substeps,
             "iterations": iterations, "repeat": repeat,
             "ms_per_frame": 1e3 * float(np.median(result.seconds_per_frame)),
@@ -193,8 +190,8 @@ def main() -> None:
     if args.vertices < 64 or args.seconds <= 0 or args.repeats < 1 or args.jobs < 1:
         raise ValueError("--vertices must be >= 64, --seconds > 0, --repeats and --jobs >= 1")
 
-    tasks = [(args.vertices, args.jitter, args.length, args.flare, motion, amplitude, args.seconds, substeps, iterations,
-              repeat)
+    tasks = [(args.vertices, args.jitter, args.length, args.flare, motion, amplitude,
+              args.seconds, substeps, iterations, repeat)
              for motion, amplitude in motions for substeps, iterations in settings
              for repeat in range(args.repeats)]
     with ProcessPoolExecutor(args.jobs) as pool:

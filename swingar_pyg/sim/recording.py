@@ -157,23 +157,35 @@ def stretch_by_place(strain: Tensor, pairs: Tensor, pinned: np.ndarray, num_vert
             for name, mask in places.items()}
 
 
-def sequence_stretch_by_place(mesh: "Mesh", pinned: np.ndarray, positions: Tensor,
-                              body_vertices: Tensor) -> dict[str, float]:
-    """:func:`stretch_by_place` of a simulated sequence: the garment ``mesh`` (its
-    rest lengths) and ``pinned`` vertices, cloth ``positions`` ``(T, N, 3)`` and the body
-    ``body_vertices`` ``(T, V, 3)`` (distance to the body: to its nearest vertex)."""
-    from scipy.spatial import cKDTree
-
+def garment_edge_strain(mesh: "Mesh", positions: Tensor) -> tuple[Tensor, Tensor]:
+    """The mesh edges ``(E, 2)`` of a garment and their :func:`signed_edge_strain`
+    ``(T, E)`` in ``positions`` ``(T, N, 3)`` against the rest ``mesh``."""
     from swingar_pyg.geometry.mesh import mesh_edges
+
+    pairs = torch.as_tensor(mesh_edges(mesh.faces))
+    rest = torch.as_tensor(mesh.vertices, dtype=positions.dtype)
+    rest_lengths = (rest[pairs[:, 0]] - rest[pairs[:, 1]]).norm(dim=-1)
+    return pairs, signed_edge_strain(positions.cpu(), pairs, rest_lengths)
+
+
+def nearest_body_distance(positions: Tensor, body_vertices: Tensor) -> Tensor:
+    """Per frame, each of ``positions`` ``(T, N, 3)``'s distance to its nearest vertex
+    of the body ``body_vertices`` ``(T, V, 3)``: ``(T, N)``."""
+    from scipy.spatial import cKDTree
 
     if positions.shape[0] != body_vertices.shape[0]:
         raise ValueError(f"the cloth has {positions.shape[0]} frames, the body "
                          f"{body_vertices.shape[0]}")
-    pairs = torch.as_tensor(mesh_edges(mesh.faces))
-    rest = torch.as_tensor(mesh.vertices, dtype=positions.dtype)
-    rest_lengths = (rest[pairs[:, 0]] - rest[pairs[:, 1]]).norm(dim=-1)
-    strain = signed_edge_strain(positions.cpu(), pairs, rest_lengths)
-    distance = torch.as_tensor(np.stack([
+    return torch.as_tensor(np.stack([
         cKDTree(body.detach().cpu().numpy()).query(cloth.detach().cpu().numpy())[0]
-        for body, cloth in zip(body_vertices, positions)]), dtype=strain.dtype)
-    return stretch_by_place(strain, pairs, pinned, mesh.num_vertices, distance)
+        for body, cloth in zip(body_vertices, positions)]), dtype=positions.dtype)
+
+
+def sequence_stretch_by_place(mesh: "Mesh", pinned: np.ndarray, positions: Tensor,
+                              body_vertices: Tensor) -> dict[str, float]:
+    """:func:`stretch_by_place` of a simulated sequence: the garment ``mesh`` (its
+    rest lengths) and ``pinned`` vertices, cloth ``positions`` ``(T, N, 3)`` and the body
+    ``body_vertices`` ``(T, V, 3)``."""
+    pairs, strain = garment_edge_strain(mesh, positions)
+    return stretch_by_place(strain, pairs, pinned, mesh.num_vertices,
+                            nearest_body_distance(positions, body_vertices))
