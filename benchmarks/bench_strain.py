@@ -3,6 +3,7 @@
     OMP_NUM_THREADS=1 python benchmarks/bench_strain.py            # ~27 minutes, 2 processes
     OMP_NUM_THREADS=1 python benchmarks/bench_strain.py --quick    # 300 vertices, 1 s, 2 motions
     OMP_NUM_THREADS=1 python benchmarks/bench_strain.py --jitter 0.3  # irregular triangulation
+    OMP_NUM_THREADS=1 python benchmarks/bench_strain.py --settings 100x1 100x1:400  # error control
 
 Scene: a procedural knee-length skirt (a quad grid, or with ``--jitter`` an irregular
 triangulation as in the datasets) on the default anny body doing each motion of ``MOTIONS``
@@ -25,9 +26,13 @@ the body (an end within 1 cm of it) and free cloth, since the remedies differ: i
 the first, the contact model for the second. ``--length`` and ``--flare`` choose another skirt
 (the quickstart's narrow long one is ``--length 0.75 --flare 0.15``).
 
+A setting ``SxI:M`` runs ``S`` substeps of ``I`` sweeps and re-runs each frame that ends above
+the bar at twice the substeps, up to ``M`` (``XPBDSettings.max_substeps``); its runs record
+the mean substeps a frame, and the cost is the mean wall time a frame (re-runs included).
+
 Writes ``benchmarks/results/bench_strain.json`` and ``bench_strain.png`` (``bench_strain_jitter``
-with ``--jitter``, ``bench_strain_l0.75_f0.15`` for another skirt), with the simulator revision
-that made them.
+with ``--jitter``, ``bench_strain_l0.75_f0.15`` for another skirt, ``_adaptive`` when a setting
+has ``:M``), with the simulator revision that made them.
 """
 
 from __future__ import annotations
@@ -58,7 +63,7 @@ from swingar_pyg.world.sequence import simulate_sequence  # noqa: E402
 
 MOTIONS = [("sway", 1.0), ("twist", 1.0), ("spin_stop", 1.0), ("walk", 1.0), ("jump", 1.0),
            ("kick", 0.7), ("kick", 1.0)]
-SETTINGS = [(50, 2), (100, 1), (100, 2), (200, 1), (50, 4)]
+SETTINGS = [(50, 2, None), (100, 1, None), (100, 2, None), (200, 1, None), (50, 4, None)]
 PERTURBATION = 1e-6  # metres
 PLACES = ("near_pins", "touching", "free")  # the keys of stretch_by_place
 
@@ -70,22 +75,26 @@ def _body() -> AnnyBody:
 
 
 def run(vertices: int, jitter: float, length: float, flare: float, motion: str,
-        amplitude: float, seconds: float, substeps: int, iterations: int, repeat: int) -> dict:
+        amplitude: float, seconds: float, substeps: int, iterations: int,
+        max_substeps: int | None, repeat: int) -> dict:
     """One simulated sequence and its strain figures."""
     body = _body()
     shape = body.default_shape()
     spec = SkirtSpec(length=length, flare=flare, vertices=vertices, jitter=jitter)
     garment = perturbed(fit_procedural_skirt(spec, body, shape), PERTURBATION, seed=repeat)
     sequence = procedural_motion(motion, body.joint_names, seconds=seconds, amplitude=amplitude)
-    settings = XPBDSettings(fps=sequence.fps, substeps=substeps, iterations=iterations)
+    settings = XPBDSettings(fps=sequence.fps, substeps=substeps, iterations=iterations,
+                            max_substeps=max_substeps)
     simulated = simulate_sequence(body, shape, garment, sequence, settings)
     result = simulated.result
     edges, strain = garment_edge_strain(garment.mesh, result.positions)
     places = stretch_by_place(strain, edges, garment.pinned, garment.mesh.num_vertices,
                               nearest_body_distance(result.positions, simulated.body_vertices))
     return {"motion": motion, "amplitude": amplitude, "substeps": substeps,
-            "iterations": iterations, "repeat": repeat,
+            "iterations": iterations, "max_substeps": max_substeps, "repeat": repeat,
             "ms_per_frame": 1e3 * float(np.median(result.seconds_per_frame)),
+            "mean_ms_per_frame": 1e3 * float(np.mean(result.seconds_per_frame)),
+            "mean_substeps": float(np.mean(result.substeps_per_frame)),
             "max_stretch": float(strain.max()), "max_compression": float(-strain.min()),
             **{f"max_stretch_{place}": value for place, value in places.items()},
             "p999_strain": float(strain.abs().flatten().quantile(0.999)),
@@ -97,13 +106,13 @@ def summarise(runs: list[dict]) -> list[dict]:
     """Median and range over the repeats of each motion and setting."""
     groups: dict[tuple, list[dict]] = {}
     for r in runs:
-        groups.setdefault((r["motion"], r["amplitude"], r["substeps"], r["iterations"]),
-                          []).append(r)
+        groups.setdefault((r["motion"], r["amplitude"], r["substeps"], r["iterations"],
+                           r["max_substeps"]), []).append(r)
     rows = []
-    for (motion, amplitude, substeps, iterations), group in groups.items():
+    for (motion, amplitude, substeps, iterations, max_substeps), group in groups.items():
         row = {"motion": motion, "amplitude": amplitude, "substeps": substeps,
-               "iterations": iterations, "repeats": len(group)}
-        for key in ("ms_per_frame", "max_stretch", "max_compression", "p999_strain",
+               "iterations": iterations, "max_substeps": max_substeps, "repeats": len(group)}
+        for key in ("ms_per_frame", "mean_ms_per_frame", "mean_substeps", "max_stretch", "max_compression", "p999_strain",
                     "mean_strain", "max_penetration", *(f"max_stretch_{place}" for place in
                                                        PLACES)):
             values = np.array([r[key] for r in group])
@@ -117,6 +126,26 @@ def label(row: dict) -> str:
     return row["motion"] + (f" a{row['amplitude']:g}" if row["amplitude"] != 1.0 else "")
 
 
+def setting_label(setting: tuple[int, int, int | None]) -> str:
+    """``SxI``, or ``SxI:M`` for substeps doubled up to ``M`` where a frame breaks the bar."""
+    substeps, iterations, max_substeps = setting
+    return f"{substeps}x{iterations}" + (f":{max_substeps}" if max_substeps else "")
+
+
+def parse_setting(text: str) -> tuple[int, int, int | None]:
+    """The inverse of :func:`setting_label`."""
+    fixed, _, adaptive = text.lower().partition(":")
+    numbers = fixed.split("x")
+    if len(numbers) != 2 or not all(n.isdigit() for n in numbers) or (
+            adaptive and not adaptive.isdigit()):
+        raise ValueError(f"--settings takes SUBSTEPSxITERATIONS[:MAX_SUBSTEPS], got {text!r}")
+    return int(numbers[0]), int(numbers[1]), int(adaptive) if adaptive else None
+
+
+def _setting(row: dict) -> tuple[int, int, int | None]:
+    return row["substeps"], row["iterations"], row.get("max_substeps")
+
+
 def plot(rows: list[dict]):
     import matplotlib
 
@@ -124,21 +153,21 @@ def plot(rows: list[dict]):
     import matplotlib.pyplot as plt
 
     motions = list(dict.fromkeys(label(r) for r in rows))
-    settings = list(dict.fromkeys((r["substeps"], r["iterations"]) for r in rows))
+    settings = list(dict.fromkeys(_setting(r) for r in rows))
     figure, (stretch_axis, cost_axis) = plt.subplots(
         1, 2, figsize=(13, 4.2), gridspec_kw={"width_ratios": [3, 1]})
     width = 0.8 / len(settings)
     for k, setting in enumerate(settings):
-        chosen = {label(r): r for r in rows if (r["substeps"], r["iterations"]) == setting}
+        chosen = {label(r): r for r in rows if _setting(r) == setting}
         position = np.arange(len(motions)) + (k - (len(settings) - 1) / 2) * width
         stretch = [chosen[m]["max_stretch"] for m in motions]
         median = 100 * np.array([s["median"] for s in stretch])
         spread = 100 * np.array([[s["median"] - s["min"] for s in stretch],
                                  [s["max"] - s["median"] for s in stretch]])
         stretch_axis.bar(position, median, width, yerr=spread, capsize=2,
-                         label=f"{setting[0]}x{setting[1]}")
-        cost_axis.bar(k, np.median([chosen[m]["ms_per_frame"]["median"] for m in motions]),
-                      0.6)
+                         label=setting_label(setting))
+        cost_axis.bar(k, np.median([chosen[m]["mean_ms_per_frame"]["median"]
+                                    for m in motions]), 0.6)
     stretch_axis.axhline(100 * STRETCH_BAR, color="k", linestyle="--", linewidth=0.8,
                          label=f"{100 * STRETCH_BAR:g} % bar")
     repeats = rows[0]["repeats"]
@@ -148,8 +177,8 @@ def plot(rows: list[dict]):
                            f"garment moved {PERTURBATION * 1e6:g} µm")
     stretch_axis.legend(fontsize=7)
     cost_axis.set(xticks=range(len(settings)),
-                  xticklabels=[f"{s}x{i}" for s, i in settings],
-                  ylabel="ms per frame (median over motions)", title="cost")
+                  xticklabels=[setting_label(s) for s in settings],
+                  ylabel="mean ms per frame (median over motions)", title="cost")
     for axis in (stretch_axis, cost_axis):
         axis.grid(alpha=0.3, axis="y")
     figure.tight_layout()
@@ -168,9 +197,10 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=3.0)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--jobs", type=int, default=2, help="worker processes, one thread each")
-    parser.add_argument("--settings", nargs="+", metavar="SxI",
-                        help="substeps x iterations to run (default: " +
-                        " ".join(f"{s}x{i}" for s, i in SETTINGS) + ")")
+    parser.add_argument("--settings", nargs="+", metavar="SxI[:M]",
+                        help="substeps x iterations to run, :M to double the substeps up to "
+                        "M on frames that end above the bar (default: " +
+                        " ".join(setting_label(s) for s in SETTINGS) + ")")
     parser.add_argument("--motions", nargs="+", metavar="NAME[@AMPLITUDE]",
                         help="motions to run (default: " +
                         " ".join(f"{m}@{a:g}" for m, a in MOTIONS) + ")")
@@ -180,10 +210,7 @@ def main() -> None:
     motions = MOTIONS if not args.motions else [
         (name, float(amplitude or 1.0)) for name, _, amplitude in
         (m.partition("@") for m in args.motions)]
-    settings = SETTINGS if not args.settings else [
-        tuple(int(n) for n in s.lower().split("x")) for s in args.settings]
-    if any(len(s) != 2 for s in settings):
-        raise ValueError(f"--settings takes SUBSTEPSxITERATIONS, got {args.settings}")
+    settings = SETTINGS if not args.settings else [parse_setting(s) for s in args.settings]
     if args.quick:
         args.vertices, args.seconds, args.repeats = 300, 1.0, 2
         motions = [("walk", 1.0), ("kick", 1.0)]
@@ -191,15 +218,16 @@ def main() -> None:
         raise ValueError("--vertices must be >= 64, --seconds > 0, --repeats and --jobs >= 1")
 
     tasks = [(args.vertices, args.jitter, args.length, args.flare, motion, amplitude,
-              args.seconds, substeps, iterations, repeat)
-             for motion, amplitude in motions for substeps, iterations in settings
+              args.seconds, substeps, iterations, max_substeps, repeat)
+             for motion, amplitude in motions for substeps, iterations, max_substeps in settings
              for repeat in range(args.repeats)]
     with ProcessPoolExecutor(args.jobs) as pool:
         runs = []
         for r in pool.map(run, *zip(*tasks)):
             runs.append(r)
-            print(f"{r['motion']:>9} a{r['amplitude']:g} {r['substeps']:>3}x{r['iterations']} "
-                  f"#{r['repeat']}: {r['ms_per_frame']:6.1f} ms/frame, stretch "
+            print(f"{r['motion']:>9} a{r['amplitude']:g} {setting_label(_setting(r)):>9} "
+                  f"#{r['repeat']}: {r['mean_ms_per_frame']:6.1f} ms/frame "
+                  f"({r['mean_substeps']:.0f} substeps), stretch "
                   f"{100 * r['max_stretch']:5.1f} %, compression {100 * r['max_compression']:5.1f}"
                   f" %, p99.9 {100 * r['p999_strain']:4.2f} %, inside "
                   f"{100 * r['max_penetration']:.2f} %; stretch near pins / touching / free "
@@ -213,6 +241,7 @@ def main() -> None:
     shape = ("" if (args.length, args.flare) == (SkirtSpec.length, SkirtSpec.flare)
              else f"_l{args.length:g}_f{args.flare:g}")
     stem = ("bench_strain" + ("_jitter" if args.jitter else "") + shape
+            + ("_adaptive" if any(s[2] for s in settings) else "")
             + ("_quick" if args.quick else ""))
     path = write_results(stem, payload, plot(rows))
     print(f"wrote {path} and its .png")

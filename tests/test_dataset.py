@@ -73,11 +73,13 @@ def test_generation_resumes_and_merges(tmp_path):
         exact = file['sequences/train-00001/penetration_exact'][:]
         assert exact.shape == (len(reference),) and ((exact >= 0) & (exact <= 1)).all()
     assert 0 <= first['simulation']['max_penetration_exact'] <= 1
-    largest = []
+    largest, substeps = [], []
     for split in ('train', 'test'):
         with h5py.File(output / f'{split}.h5') as file:
             largest += [g['max_stretch'][:].max() for g in file['sequences'].values()]
+            substeps += [g['substeps_per_frame'][:].mean() for g in file['sequences'].values()]
     assert len(largest) == 3
+    assert np.isclose(first['simulation']['substeps_mean'], np.mean(substeps))
     assert np.isclose(first['simulation']['max_stretch_median_sequence'], np.median(largest))
     assert np.isclose(first['simulation']['share_over_stretch_bar'],
                       np.mean(np.array(largest) > STRETCH_BAR))

@@ -58,6 +58,27 @@ def test_simulate_with_dihedral_bending_stores_the_model(tmp_path, capsys):
     assert '--bending chooses the XPBD bending model' in capsys.readouterr().err
 
 
+def test_simulate_with_error_controlled_substeps_records_them(tmp_path, capsys):
+    pytest.importorskip('anny')
+    import json
+
+    out = tmp_path / 'run'
+    # 2 substeps a frame stretch a kicked skirt far beyond the bar: frames are re-run
+    assert main(['simulate', '--motion', 'kick', '--seconds', '0.3', '--vertices', '150',
+                 '--substeps', '2', '--max-substeps', '16', '--no-preview',
+                 '--out', str(out)]) == 0
+    with h5py.File(out / 'sequence.h5') as file:
+        sequence = file['sequences/000000']
+        assert json.loads(sequence.attrs['settings'])['max_substeps'] == 16
+        used = sequence['substeps_per_frame'][:]
+        stretch = sequence['max_stretch'][:]
+    assert set(used.tolist()) <= {2, 4, 8, 16} and used.max() > 2
+    assert (stretch[used < 16] <= 0.06).all()
+    with pytest.raises(SystemExit):
+        main(['simulate', '--solver', 'vbd', '--max-substeps', '20', '--out', str(out)])
+    assert '--max-substeps is XPBD' in capsys.readouterr().err
+
+
 def test_simulate_a_sewn_jumpsuit(tmp_path, capsys):
     pytest.importorskip('anny')
     out = tmp_path / 'run'

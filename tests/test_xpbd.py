@@ -1,3 +1,5 @@
+import dataclasses
+
 import numpy as np
 import pytest
 import torch
@@ -79,6 +81,24 @@ def test_stiff_and_extreme_settings_stay_finite_and_bounded(settings, stretch_bo
     assert result.max_stretch.max() < stretch_bound
 
 
+def test_frames_above_the_target_stretch_are_rerun_at_more_substeps():
+    mesh, top = hanging_sheet()
+    coarse = XPBDSettings(fps=7.5, substeps=5, settle_frames=0)  # stretches, see above
+    _, fixed = run(mesh, top, frames=15, settings=coarse)
+    assert fixed.max_stretch.max() > 0.06 and (fixed.substeps_per_frame == 5).all()
+    _, adaptive = run(mesh, top, frames=15, settings=dataclasses.replace(
+        coarse, max_substeps=80, target_stretch=0.06))
+    used = adaptive.substeps_per_frame
+    assert set(used.tolist()) <= {5, 10, 20, 40, 80} and used.max() > 5
+    assert (adaptive.max_stretch[used < 80] <= 0.06).all()  # below the cap, each frame keeps it
+    assert adaptive.max_stretch.max() < fixed.max_stretch.max()
+    # With a target no frame breaks, nothing is re-run: the fixed run, bit for bit.
+    _, lenient = run(mesh, top, frames=15, settings=dataclasses.replace(
+        coarse, max_substeps=80, target_stretch=1.0))
+    assert (lenient.substeps_per_frame == 5).all()
+    assert torch.equal(lenient.positions, fixed.positions)
+
+
 def test_all_pinned_edges_at_zero_compliance_do_not_divide_zero_by_zero():
     mesh, _ = hanging_sheet(4, 4)
     everything = np.arange(mesh.num_vertices)
@@ -111,6 +131,8 @@ def test_cloth_dropped_on_a_sphere_does_not_enter_it():
     ({'density': 0.0}, 'density must be > 0'),
     ({'friction': 2.0}, r'friction must be in \[0, 1\]'),
     ({'damping': float('nan')}, 'damping must be finite'),
+    ({'substeps': 50, 'max_substeps': 20}, 'max_substeps must be None or >= substeps'),
+    ({'target_stretch': 0.0}, 'target_stretch must be finite and > 0'),
 ])
 def test_bad_settings_raise(kwargs, message):
     with pytest.raises(ValueError, match=message):

@@ -31,6 +31,8 @@ class SimulationResult:
         seconds_per_frame: ``(T,)`` wall time of each frame.
         max_stretch, mean_stretch: ``(T,)`` edge strain ``|l / L - 1|``.
         penetration: ``(T,)`` fraction of free vertices inside the body (NaN without body).
+        substeps_per_frame: ``(T,)`` solver substeps each frame was run with (the last run
+            of a frame the solver re-ran at more substeps).
         settings: the solver settings.
     """
 
@@ -39,6 +41,7 @@ class SimulationResult:
     max_stretch: np.ndarray
     mean_stretch: np.ndarray
     penetration: np.ndarray
+    substeps_per_frame: np.ndarray
     settings: dict = field(default_factory=dict)
 
 
@@ -74,7 +77,7 @@ def edge_strain(x: Tensor, stretch: DistanceConstraints) -> Tensor:
 
 
 class FrameRecorder:
-    """Collects positions, wall time, strain and penetration of each output frame.
+    """Collects positions, wall time, substeps, strain and penetration of each output frame.
 
     Args:
         frames, vertices: size of the sequence.
@@ -91,13 +94,16 @@ class FrameRecorder:
         self.seconds = np.zeros(frames)
         self.max_stretch, self.mean_stretch = np.zeros(frames), np.zeros(frames)
         self.penetration = np.full(frames, np.nan)
+        self.substeps = np.zeros(frames, dtype=np.int32)
 
-    def record(self, frame: int, x: Tensor, seconds: float) -> None:
-        """Stores frame ``frame``; raises ``FloatingPointError`` if ``x`` is not finite."""
+    def record(self, frame: int, x: Tensor, seconds: float, substeps: int) -> None:
+        """Stores frame ``frame``, reached in ``substeps`` solver substeps; raises
+        ``FloatingPointError`` if ``x`` is not finite."""
         if not torch.isfinite(x).all():
             raise FloatingPointError(f"cloth state became non-finite at frame {frame}")
         self.positions[frame] = x.detach().cpu()
         self.seconds[frame] = seconds
+        self.substeps[frame] = substeps
         strain = edge_strain(x, self.stretch)
         self.max_stretch[frame] = strain.max().item()
         self.mean_stretch[frame] = strain.mean().item()
@@ -107,7 +113,7 @@ class FrameRecorder:
 
     def result(self, settings: dict) -> SimulationResult:
         return SimulationResult(self.positions, self.seconds, self.max_stretch, self.mean_stretch,
-                                self.penetration, settings)
+                                self.penetration, self.substeps, settings)
 
 
 def stretch_by_place(strain: Tensor, pairs: Tensor, pinned: np.ndarray, num_vertices: int,

@@ -216,5 +216,5 @@ class VBDCloth:
                 if not torch.isfinite(x).all():
                     raise FloatingPointError("cloth state became non-finite while settling")
                 continue
-            recorder.record(frame, x, time.perf_counter() - start)
+            recorder.record(frame, x, time.perf_counter() - start, s.substeps)
         return recorder.result(asdict(s))

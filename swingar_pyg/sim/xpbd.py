@@ -31,7 +31,10 @@ sweep. Hinges are solved in one Jacobi sweep, each vertex's corrections averaged
 over its hinges (Macklin et al. 2014): a hinge has four vertices, so colouring
 needs ~14 colours and costs ~4x the sweep (measured), for no closer agreement
 with VBD. Many short substeps keep stiff cloth stable and the
-swing free (DESIGN §8). Runs on any torch device.
+swing free (DESIGN §8). With ``max_substeps`` set the substep is error-controlled: a
+frame that ends with an edge strain above ``target_stretch`` is run again from its
+start at twice the substeps (up to ``max_substeps``), so the cost goes to the frames
+that need it and each frame's substeps are recorded. Runs on any torch device.
 """
 
 from __future__ import annotations
@@ -56,6 +59,7 @@ from swingar_pyg.sim.constraints import (
     tether_constraints,
 )
 from swingar_pyg.sim.recording import (
+    STRETCH_BAR,
     FrameRecorder,
     SimulationResult,
     check_inputs,
@@ -100,6 +104,11 @@ class XPBDSettings:
         settle_frames: frames simulated on the first pose before recording.
         contacts_per_frame: how often per frame each cloth vertex is paired with its
             nearest body vertex (measured: once beats twice on walk and kick).
+        max_substeps: ``None`` runs every frame at ``substeps``. Otherwise a frame that
+            ends with an edge strain :math:`|l / L - 1|` above ``target_stretch`` is run
+            again from its start at twice the substeps, up to ``max_substeps``, and the
+            last run is kept (error control: the cost goes to the frames that need it).
+        target_stretch: the largest edge strain a frame may end with before it is re-run.
     """
 
     fps: float = 30.0
@@ -118,6 +127,8 @@ class XPBDSettings:
     gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
     settle_frames: int = 15
     contacts_per_frame: int = 1
+    max_substeps: int | None = None
+    target_stretch: float = STRETCH_BAR
 
     def __post_init__(self):
         if (self.fps <= 0 or self.substeps < 1 or self.iterations < 1
@@ -132,6 +143,11 @@ class XPBDSettings:
             value = getattr(self, name)
             if not np.isfinite(value) or value < 0:
                 raise ValueError(f"{name} must be finite and >= 0, got {value}")
+        if self.max_substeps is not None and self.max_substeps < self.substeps:
+            raise ValueError(f"max_substeps must be None or >= substeps ({self.substeps}), "
+                             f"got {self.max_substeps}")
+        if not (np.isfinite(self.target_stretch) and self.target_stretch > 0):
+            raise ValueError(f"target_stretch must be finite and > 0, got {self.target_stretch}")
         if self.density == 0:
             raise ValueError("density must be > 0")
         if not 0 <= self.friction <= 1:
@@ -149,6 +165,18 @@ class _Colour:
     wi: Tensor  # (E, 1) inverse masses
     wj: Tensor
     inverse_denominator: Tensor  # 1 / (w_i + w_j + alpha), 0 where that is 0 (no step)
+
+
+@dataclass(frozen=True)
+class _Substep:
+    r"""What the substep length fixes: ``dt`` and each constraint's XPBD compliance
+    :math:`\alpha / \Delta t^2` (folded into the colours' denominators)."""
+
+    substeps: int
+    dt: float
+    stretch_colours: tuple[float, tuple[_Colour, ...]]
+    bend_colours: tuple[float, tuple[_Colour, ...]] | None  # distance bending
+    hinge_compliance: Tensor | None  # dihedral bending: 1 / (k |e0| dt^2) per hinge
 
 
 def vertex_masses(mesh: Mesh, density: float) -> Tensor:
@@ -195,26 +223,37 @@ class XPBDCloth:
         self.free = self.inverse_mass > 0
         self.tethers = (tether_constraints(mesh, pinned).to(self.device, dtype)
                         if settings.tethers else None)
-        # What stays fixed for every run: the substep, each distance colour's terms and,
-        # per hinge, its corners (4, H), their inverse masses, those times each corner's
-        # share of its hinges, and the XPBD compliance 1 / (k |e0| dt^2).
-        self.dt = dt = 1.0 / (settings.fps * settings.substeps)
-        self.stretch_colours = self._colours(self.stretch, settings.stretch_compliance)
-        if settings.bending == "distance":
-            self.bend_colours = self._colours(self.bend, settings.bend_compliance)
-        else:
+        # What stays fixed for every run: per hinge, its corners (4, H), their inverse
+        # masses and those times each corner's share of its hinges; per substep count,
+        # the terms of _Substep (made when first needed).
+        if settings.bending == "dihedral":
             self.hinge_corners = self.bend.hinges.T.contiguous()
             self.hinge_weights = self.inverse_mass[self.hinge_corners]
             self.hinge_shares = self.hinge_weights * self.bend.share[self.hinge_corners, 0]
-            stiffness_dt2 = settings.bend_stiffness * self.bend.rest_lengths * dt * dt
-            self.hinge_compliance = 1.0 / stiffness_dt2.clamp_min(torch.finfo(dtype).tiny)
+        self._substeps: dict[int, _Substep] = {}
         self.gravity = torch.tensor(settings.gravity, device=self.device, dtype=dtype)
 
-    def _colours(self, constraints: DistanceConstraints, compliance: float
+    def _substep(self, substeps: int) -> _Substep:
+        """The terms of ``substeps`` steps a frame, made once per cloth."""
+        if substeps not in self._substeps:
+            s = self.settings
+            dt = 1.0 / (s.fps * substeps)
+            bend_colours = hinge_compliance = None
+            if s.bending == "distance":
+                bend_colours = self._colours(self.bend, s.bend_compliance, dt)
+            else:
+                stiffness_dt2 = s.bend_stiffness * self.bend.rest_lengths * dt * dt
+                hinge_compliance = 1.0 / stiffness_dt2.clamp_min(torch.finfo(self.dtype).tiny)
+            self._substeps[substeps] = _Substep(
+                substeps, dt, self._colours(self.stretch, s.stretch_compliance, dt),
+                bend_colours, hinge_compliance)
+        return self._substeps[substeps]
+
+    def _colours(self, constraints: DistanceConstraints, compliance: float, dt: float
                  ) -> tuple[float, tuple["_Colour", ...]]:
         """The XPBD compliance ``compliance / dt^2`` and, per colour, what stays fixed
         for the run: pairs, rest lengths, inverse masses, ``1 / (w_i + w_j + alpha)``."""
-        alpha = compliance / (self.dt * self.dt)
+        alpha = compliance / (dt * dt)
         w = self.inverse_mass
         colours = []
         for start, stop in constraints.colour_slices:
@@ -243,7 +282,7 @@ class XPBDCloth:
             p.index_add_(0, c.i, c.wi * along)
             p.index_add_(0, c.j, -c.wj * along)
 
-    def _solve_hinges(self, p: Tensor, lagrange: Tensor) -> None:
+    def _solve_hinges(self, p: Tensor, compliance: Tensor, lagrange: Tensor) -> None:
         """One Jacobi sweep over every hinge: each hinge's XPBD step from the same
         positions, a vertex's corrections averaged over its hinges."""
         if self.settings.bend_stiffness == 0:
@@ -252,7 +291,7 @@ class XPBDCloth:
         corners = self.hinge_corners.reshape(-1)
         angle, gradient, valid = dihedral_angles(
             p.T.contiguous().index_select(1, corners).view(3, 4, -1))
-        weights, alpha = self.hinge_weights, self.hinge_compliance
+        weights, alpha = self.hinge_weights, compliance
         difference = angle - self.bend.rest_angles
         violation = torch.atan2(torch.sin(difference), torch.cos(difference))
         denominator = alpha + (weights * gradient.square().sum(0)).sum(0)
@@ -294,6 +333,49 @@ class XPBDCloth:
     def strain(self, x: Tensor) -> Tensor:
         return edge_strain(x, self.stretch)
 
+    def _frame(self, x: Tensor, v: Tensor, frame: int, previous_target: Tensor,
+               target: Tensor, collider: BodyCollider | None, settling: bool,
+               step: _Substep) -> tuple[Tensor, Tensor]:
+        """One output frame of ``step.substeps`` substeps from positions ``x`` and
+        velocities ``v`` (left unchanged), the pins moving from ``previous_target`` to
+        ``target``; returns the frame's end positions and velocities."""
+        s, dt = self.settings, step.dt
+        decay = float(np.exp(-s.damping * dt))
+        stretch_lagrange = torch.zeros_like(self.stretch.rest_lengths)
+        bend_lagrange = torch.zeros_like(self.bend.rest_lengths)
+        contact_interval = max(1, step.substeps // s.contacts_per_frame)
+        track = body_step = None
+        for sub in range(step.substeps):
+            fraction = (sub + 1) / step.substeps
+            if collider is not None and sub % contact_interval == 0:
+                at = 1.0 if settling else sub / step.substeps
+                track = collider.track(frame, collider.nearest(frame, x, at))
+                body_step = track.motion.to(self.device, self.dtype) / step.substeps
+                if settling:
+                    body_step = torch.zeros_like(body_step)
+            v = (v + dt * self.gravity) * decay
+            p = x + dt * v
+            p[self.pinned] = torch.lerp(previous_target, target, fraction)
+            stretch_lagrange.zero_()
+            bend_lagrange.zero_()
+            for _ in range(s.iterations):
+                # Stretch last: bending, tethers and contacts move vertices without
+                # regard to their edges; solved after them, the edges end each sweep
+                # nearest their rest lengths (see SIMULATOR_REVISION).
+                if s.bending == "distance":
+                    self._solve(p, *step.bend_colours, bend_lagrange)
+                else:
+                    self._solve_hinges(p, step.hinge_compliance, bend_lagrange)
+                if self.tethers is not None:
+                    self._tether(p, self.tethers)
+                if collider is not None:
+                    body_fraction = 1.0 if settling else fraction
+                    self._collide(p, x, track, body_fraction, body_step, collider.thickness)
+                self._solve(p, *step.stretch_colours, stretch_lagrange)
+            v = (p - x) / dt
+            x = p
+        return x, v
+
     def simulate(self, initial: Tensor, pin_targets: Tensor,
                  collider: BodyCollider | None = None,
                  progress: bool = False) -> SimulationResult:
@@ -312,13 +394,7 @@ class XPBDCloth:
         x = initial.to(self.device, self.dtype).clone()
         targets = pin_targets.to(self.device, self.dtype)
         v = torch.zeros_like(x)
-        dt = self.dt
-        decay = float(np.exp(-s.damping * dt))
-        stretch_lagrange = torch.zeros_like(self.stretch.rest_lengths)
-        bend_lagrange = torch.zeros_like(self.bend.rest_lengths)
         recorder = FrameRecorder(frames, n, self.stretch, self.free, collider, self.dtype)
-
-        contact_interval = max(1, s.substeps // s.contacts_per_frame)
         schedule = [0] * s.settle_frames + list(range(frames))
         iterator = schedule
         if progress:
@@ -329,40 +405,19 @@ class XPBDCloth:
             start = time.perf_counter()
             settling = step_index < s.settle_frames
             previous_target = targets[0] if settling else targets[max(frame - 1, 0)]
-            track = body_step = None
-            for sub in range(s.substeps):
-                fraction = (sub + 1) / s.substeps
-                if collider is not None and sub % contact_interval == 0:
-                    at = 1.0 if settling else sub / s.substeps
-                    track = collider.track(frame, collider.nearest(frame, x, at))
-                    body_step = track.motion.to(self.device, self.dtype) / s.substeps
-                    if settling:
-                        body_step = torch.zeros_like(body_step)
-                v = (v + dt * self.gravity) * decay
-                p = x + dt * v
-                p[self.pinned] = torch.lerp(previous_target, targets[frame], fraction)
-                stretch_lagrange.zero_()
-                bend_lagrange.zero_()
-                for _ in range(s.iterations):
-                    # Stretch last: bending, tethers and contacts move vertices without
-                    # regard to their edges; solved after them, the edges end each sweep
-                    # nearest their rest lengths (see SIMULATOR_REVISION).
-                    if s.bending == "distance":
-                        self._solve(p, *self.bend_colours, bend_lagrange)
-                    else:
-                        self._solve_hinges(p, bend_lagrange)
-                    if self.tethers is not None:
-                        self._tether(p, self.tethers)
-                    if collider is not None:
-                        body_fraction = 1.0 if settling else fraction
-                        self._collide(p, x, track, body_fraction, body_step,
-                                      collider.thickness)
-                    self._solve(p, *self.stretch_colours, stretch_lagrange)
-                v = (p - x) / dt
-                x = p
+            substeps = s.substeps
+            while True:
+                # x and v are not changed in place, so a frame re-run starts where it did
+                end_x, end_v = self._frame(x, v, frame, previous_target, targets[frame],
+                                           collider, settling, self._substep(substeps))
+                if (s.max_substeps is None or substeps >= s.max_substeps
+                        or self.strain(end_x).max() <= s.target_stretch):
+                    break
+                substeps = min(2 * substeps, s.max_substeps)
+            x, v = end_x, end_v
             if settling:
                 if not torch.isfinite(x).all():
                     raise FloatingPointError("cloth state became non-finite while settling")
                 continue
-            recorder.record(frame, x, time.perf_counter() - start)
+            recorder.record(frame, x, time.perf_counter() - start, substeps)
         return recorder.result(asdict(s))

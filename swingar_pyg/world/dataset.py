@@ -143,6 +143,7 @@ def _run_job(job: Job, fps: float, seconds: float, solver: XPBDSettings, part: s
                                        sequence.body_vertices)
     return {"id": job.id, "vertices": garment.mesh.num_vertices, "frames": motion.num_frames,
             "ms_per_frame": 1e3 * float(np.median(result.seconds_per_frame)),
+            "mean_substeps": float(np.mean(result.substeps_per_frame)),
             "max_stretch": float(result.max_stretch.max()), "max_stretch_by_place": places,
             "max_penetration": float(np.nanmax(result.penetration)),
             "max_penetration_exact": float(sequence.penetration_exact.max())}
@@ -209,6 +210,8 @@ def make_dataset(config: DatasetConfig, output: str | Path | None = None,
         largest = np.array([r["max_stretch"] for r in reports])
         summary["simulation"] = {
             "ms_per_frame_median": float(np.median([r["ms_per_frame"] for r in reports])),
+            # above the solver's substeps where it re-ran frames over the bar (max_substeps)
+            "substeps_mean": float(np.mean([r["mean_substeps"] for r in reports])),
             "max_stretch": float(largest.max()),
             # One sequence's largest strain is chaotic (benchmarks/bench_strain.py): how the
             # sequences spread says more than the worst of them.

@@ -8,6 +8,7 @@ Layout::
                       rigid_vertices (T,N,3) rotations (T,J,3,3) translation (T,3)
                       body_shape (S,) seconds_per_frame max_stretch mean_stretch
                       penetration (T,) [simulator's own nearest-vertex test]
+                      substeps_per_frame (T,) [absent in files older than it]
                       penetration_exact (T,) [ray parity; absent when not measured]
                       attrs: garment, motion, fps, joint_names, settings (JSON),
                              simulator_revision (absent in files older than it)
@@ -62,7 +63,8 @@ def write_sequences(path: str | Path, sequences: list[SimulatedSequence],
                 group["rotations"] = sequence.motion.rotations.numpy()
                 group["translation"] = sequence.motion.translation.numpy()
                 group["body_shape"] = sequence.body_shape.numpy()
-                for name in ("seconds_per_frame", "max_stretch", "mean_stretch", "penetration"):
+                for name in ("seconds_per_frame", "max_stretch", "mean_stretch", "penetration",
+                             "substeps_per_frame"):
                     group[name] = getattr(result, name)
                 if sequence.penetration_exact is not None:
                     group["penetration_exact"] = sequence.penetration_exact
