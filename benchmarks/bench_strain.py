@@ -112,9 +112,9 @@ def summarise(runs: list[dict]) -> list[dict]:
     for (motion, amplitude, substeps, iterations, max_substeps), group in groups.items():
         row = {"motion": motion, "amplitude": amplitude, "substeps": substeps,
                "iterations": iterations, "max_substeps": max_substeps, "repeats": len(group)}
-        for key in ("ms_per_frame", "mean_ms_per_frame", "mean_substeps", "max_stretch", "max_compression", "p999_strain",
-                    "mean_strain", "max_penetration", *(f"max_stretch_{place}" for place in
-                                                       PLACES)):
+        for key in ("ms_per_frame", "mean_ms_per_frame", "mean_substeps", "max_stretch",
+                    "max_compression", "p999_strain", "mean_strain", "max_penetration",
+                    *(f"max_stretch_{place}" for place in PLACES)):
             values = np.array([r[key] for r in group])
             row[key] = {"median": float(np.median(values)), "min": float(values.min()),
                         "max": float(values.max())}
@@ -143,7 +143,7 @@ def parse_setting(text: str) -> tuple[int, int, int | None]:
 
 
 def _setting(row: dict) -> tuple[int, int, int | None]:
-    return row["substeps"], row["iterations"], row.get("max_substeps")
+    return row["substeps"], row["iterations"], row["max_substeps"]
 
 
 def plot(rows: list[dict]):
