@@ -23,16 +23,16 @@ median wall time per frame, and the largest share of vertices inside the body.
 Each run also splits its largest stretch by where it happens (``stretch_by_place``):
 within two edges of the pins (the rows carrying the skirt and the waistband's pull), touching
 the body (an end within 1 cm of it) and free cloth, since the remedies differ: iterations for
-the first, the contact model for the second. ``--length`` and ``--flare`` choose another skirt
-(the quickstart's narrow long one is ``--length 0.75 --flare 0.15``).
+the first, the contact model for the second. ``--length``, ``--flare`` and ``--slit`` choose
+another skirt (the quickstart's narrow long one is ``--length 0.75 --flare 0.15``).
 
 A setting ``SxI:M`` runs ``S`` substeps of ``I`` sweeps and re-runs each frame that ends above
 the bar at twice the substeps, up to ``M`` (``XPBDSettings.max_substeps``); its runs record
 the mean substeps a frame, and the cost is the mean wall time a frame (re-runs included).
 
 Writes ``benchmarks/results/bench_strain.json`` and ``bench_strain.png`` (``bench_strain_jitter``
-with ``--jitter``, ``bench_strain_l0.75_f0.15`` for another skirt, ``_adaptive`` when a setting
-has ``:M``), with the simulator revision that made them.
+with ``--jitter``, ``bench_strain_l0.75_f0.15`` for another skirt, ``_s0.3`` after it with a
+slit, ``_adaptive`` when a setting has ``:M``), with the simulator revision that made them.
 """
 
 from __future__ import annotations
@@ -74,13 +74,13 @@ def _body() -> AnnyBody:
     return AnnyBody()
 
 
-def run(vertices: int, jitter: float, length: float, flare: float, motion: str,
+def run(vertices: int, jitter: float, length: float, flare: float, slit: float, motion: str,
         amplitude: float, seconds: float, substeps: int, iterations: int,
         max_substeps: int | None, repeat: int) -> dict:
     """One simulated sequence and its strain figures."""
     body = _body()
     shape = body.default_shape()
-    spec = SkirtSpec(length=length, flare=flare, vertices=vertices, jitter=jitter)
+    spec = SkirtSpec(length=length, flare=flare, vertices=vertices, jitter=jitter, slit=slit)
     garment = perturbed(fit_procedural_skirt(spec, body, shape), PERTURBATION, seed=repeat)
     sequence = procedural_motion(motion, body.joint_names, seconds=seconds, amplitude=amplitude)
     settings = XPBDSettings(fps=sequence.fps, substeps=substeps, iterations=iterations,
@@ -194,6 +194,8 @@ def main() -> None:
                         help="skirt length, m")
     parser.add_argument("--flare", type=float, default=SkirtSpec.flare,
                         help="how far the hem stands out: sine of the cone's half-angle")
+    parser.add_argument("--slit", type=float, default=0.0,
+                        help="a vent at the back this high up from the hem, m (SkirtSpec.slit)")
     parser.add_argument("--seconds", type=float, default=3.0)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--jobs", type=int, default=2, help="worker processes, one thread each")
@@ -217,7 +219,7 @@ def main() -> None:
     if args.vertices < 64 or args.seconds <= 0 or args.repeats < 1 or args.jobs < 1:
         raise ValueError("--vertices must be >= 64, --seconds > 0, --repeats and --jobs >= 1")
 
-    tasks = [(args.vertices, args.jitter, args.length, args.flare, motion, amplitude,
+    tasks = [(args.vertices, args.jitter, args.length, args.flare, args.slit, motion, amplitude,
               args.seconds, substeps, iterations, max_substeps, repeat)
              for motion, amplitude in motions for substeps, iterations, max_substeps in settings
              for repeat in range(args.repeats)]
@@ -236,10 +238,11 @@ def main() -> None:
     rows = summarise(runs)
     payload = {"machine": machine_info(), "simulator_revision": SIMULATOR_REVISION,
                "vertices": args.vertices, "jitter": args.jitter, "length": args.length,
-               "flare": args.flare, "seconds": args.seconds,
+               "flare": args.flare, "slit": args.slit, "seconds": args.seconds,
                "perturbation_m": PERTURBATION, "jobs": args.jobs, "rows": rows, "runs": runs}
     shape = ("" if (args.length, args.flare) == (SkirtSpec.length, SkirtSpec.flare)
              else f"_l{args.length:g}_f{args.flare:g}")
+    shape += f"_s{args.slit:g}" if args.slit else ""
     stem = ("bench_strain" + ("_jitter" if args.jitter else "") + shape
             + ("_adaptive" if any(s[2] for s in settings) else "")
             + ("_quick" if args.quick else ""))

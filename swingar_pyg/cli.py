@@ -48,6 +48,10 @@ def _simulate(args: argparse.Namespace) -> int:
                     raise ValueError(f"--{name} is not a jumpsuit's (its legs: a dataset "
                                      "config's leg, ease and flare)")
                 entry[name] = getattr(args, name)
+        if args.slit:
+            if args.kind not in ("skirt", "dress"):
+                raise ValueError(f"--slit is a skirt's or a dress's, not a {args.kind}'s")
+            entry["slit"] = args.slit
         garment = fit_garment(garment_spec(entry), body, shape)
     motion = make_motion(args.motion, body, shape, seconds=args.seconds, fps=args.fps,
                          speed=args.speed, amplitude=args.amplitude, mirror=args.mirror)
@@ -181,6 +185,8 @@ def build_parser() -> argparse.ArgumentParser:
     simulate.add_argument("--vertices", type=int, default=1500)
     simulate.add_argument("--jitter", type=float, default=0.0,
                           help="> 0 for an irregular triangulation")
+    simulate.add_argument("--slit", type=float, default=0.0,
+                          help="skirt or dress: a vent at the back this high up from the hem, m")
     simulate.add_argument("--body-shape", type=float, nargs=6, metavar="P",
                           help="anny gender age muscle weight height proportions, in [0, 1]")
     simulate.add_argument("--solver", choices=("xpbd", "vbd"), default="xpbd",

@@ -37,7 +37,7 @@ models:
     collisions: [none, exact, neural]
 precisions: [fp32, bf16]
 train_missing: true
-simulator: {{settings: [[5, 2], [10, 2]], sequences: 1{second}}}
+simulator: {{settings: [[5, 2], [10, 2], [5, 2, 20]], sequences: 1{second}}}
 streaming: {{vertices: [150], frames: 4}}
 extra_tests: {{"the test split again": {dataset}}}
 stability: "off"
@@ -79,7 +79,8 @@ def test_report_measures_every_method_on_the_same_sequences(tiny_windows, tiny_b
     methods = [row['method'] for row in rows]
     assert methods == ['tiny estimator', 'tiny estimator bf16',
                        'tiny estimator + exact collisions', 'tiny estimator + neural collisions',
-                       'rigid skinning', 'simulator 5x2', 'simulator 10x2'] + (
+                       'rigid skinning', 'simulator 5x2', 'simulator 10x2',
+                       'simulator 5x2:20'] + (
                            ['VBD simulator 2x2 (newton)'] if has_newton else [])
     by_method = {row['method']: row for row in rows}
     # the exact pass leaves nothing inside (the network only tries to)
@@ -94,6 +95,10 @@ def test_report_measures_every_method_on_the_same_sequences(tiny_windows, tiny_b
     assert by_method['simulator 10x2']['is_ground_truth_setting'] == 'True'
     assert float(by_method['simulator 10x2']['mean_mm']) < 0.1 * float(
         by_method['simulator 5x2']['mean_mm'])
+    # error-controlled from 5 substeps: not the data's (fixed 10x2) setting, and measured
+    controlled = by_method['simulator 5x2:20']
+    assert controlled['is_ground_truth_setting'] == 'False' and controlled['max_substeps'] == '20'
+    assert 0 < float(controlled['mean_mm']) < 1e3
     if has_newton:  # another cloth model: neither the data nor far from it
         second = float(by_method['VBD simulator 2x2 (newton)']['mean_mm'])
         assert float(by_method['simulator 10x2']['mean_mm']) < second < 1e3
@@ -147,6 +152,9 @@ def test_report_configs_parse_and_bad_ones_are_refused(tmp_path):
     bad.write_text('name: x\noutput: y\ndataset: z\nmodels: [{name: m, configs: [c], '
                    'collisions: [neural]}]\n')
     with pytest.raises(ValueError, match='names no body_sdf'):
+        ReportConfig.from_yaml(bad)
+    bad.write_text('name: x\noutput: y\ndataset: z\nmodels: []\nsimulator: {settings: [[5]]}\n')
+    with pytest.raises(ValueError, match=r'\[substeps, iterations, max_substeps\], got \[5\]'):
         ReportConfig.from_yaml(bad)
     bad.write_text('name: x\noutput: y\nmodels: []\n')
     with pytest.raises(ValueError, match="needs 'dataset'"):

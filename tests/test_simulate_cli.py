@@ -90,6 +90,18 @@ def test_simulate_a_sewn_jumpsuit(tmp_path, capsys):
     assert "--length is not a jumpsuit's" in capsys.readouterr().err
 
 
+def test_simulate_a_skirt_with_a_slit(tmp_path, capsys):
+    pytest.importorskip('anny')
+    out = tmp_path / 'run'
+    assert main(['simulate', '--length', '0.7', '--slit', '0.3', '--motion', 'walk',
+                 '--seconds', '0.2', '--vertices', '300', '--substeps', '5', '--no-preview',
+                 '--out', str(out)]) == 0
+    assert 'skirt-l0.70-f0.35-n300-grid-s0.30' in capsys.readouterr().out
+    with pytest.raises(SystemExit):
+        main(['simulate', '--kind', 'tshirt', '--slit', '0.2', '--out', str(out)])
+    assert "--slit is a skirt's or a dress's, not a tshirt's" in capsys.readouterr().err
+
+
 def test_simulate_rejects_an_unknown_motion(tmp_path, capsys):
     pytest.importorskip('anny')
     with pytest.raises(SystemExit):

@@ -129,6 +129,43 @@ def test_irregular_skirt_has_a_different_topology():
     assert len(np.unique(degree[1])) > len(np.unique(degree[0]))
 
 
+def test_a_slit_opens_one_column_of_cells_at_the_back_up_from_the_hem():
+    from scipy.sparse import coo_array
+    from scipy.sparse.csgraph import connected_components
+
+    from swingar_pyg.geometry.mesh import boundary_edges, mesh_edges
+
+    body, faces, indices, weights = cylinder_body()
+    closed = procedural_skirt(SkirtSpec(length=0.6, vertices=600), body, faces, ('Hips',),
+                              indices, weights)
+    spec = SkirtSpec(length=0.6, vertices=600, slit=0.25)
+    slit = procedural_skirt(spec, body, faces, ('Hips',), indices, weights)
+    assert slit.name == closed.name + '-s0.25'
+    np.testing.assert_array_equal(slit.mesh.vertices, closed.mesh.vertices)
+    v = slit.mesh.vertices
+    hem = spec.waist_height - spec.length
+    opened = np.array(sorted(set(map(tuple, boundary_edges(slit.mesh.faces)))
+                             - set(map(tuple, boundary_edges(closed.mesh.faces)))))
+    # The new border: both sides of the open column (an edge per open row each) and the
+    # top of its highest open cell; the hem edge under the column is gone.
+    rows = (len(closed.mesh.faces) - len(slit.mesh.faces)) // 2  # two triangles a cell
+    ends = v[opened]
+    vertical = ends[:, 0, 2] != ends[:, 1, 2]
+    assert rows > 0 and len(opened) == 2 * rows + 1 and vertical.sum() == 2 * rows
+    assert (ends[..., 1] > 0.1).all()  # at the back, +y
+    assert ends[..., 2].min() == pytest.approx(hem)
+    ring = spec.length / (len(np.unique(v[:, 2])) - 1)
+    top = ends[~vertical][0, :, 2]
+    assert (top == ends[..., 2].max()).all()
+    assert hem + spec.slit - ring < top[0] <= hem + spec.slit + 1e-9
+    # Still one piece, and the faces it keeps are the closed skirt's.
+    n = slit.mesh.num_vertices
+    edges = mesh_edges(slit.mesh.faces)
+    graph = coo_array((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
+    assert connected_components(graph, directed=False)[0] == 1
+    assert set(map(tuple, slit.mesh.faces)) < set(map(tuple, closed.mesh.faces))
+
+
 def test_signed_distance_to_surface_matches_a_sphere():
     import trimesh
 
@@ -145,7 +182,9 @@ def test_signed_distance_to_surface_matches_a_sphere():
                                              ({'flare': 1.0}, 'flare'),
                                              ({'vertices': 10}, 'at least 64'),
                                              ({'jitter': -0.1}, 'jitter'),
-                                             ({'jitter': 0.5}, 'jitter')])
+                                             ({'jitter': 0.5}, 'jitter'),
+                                             ({'slit': -0.1}, 'slit'),
+                                             ({'length': 0.5, 'slit': 0.5}, 'slit')])
 def test_skirt_spec_validation(kwargs, message):
     with pytest.raises(ValueError, match=message):
         SkirtSpec(**kwargs)

@@ -190,19 +190,30 @@ def _resimulate(sequences: list[TestSequence], settings_for: Callable[[dict], ob
 
 
 def evaluate_simulator(sequences: list[TestSequence], substeps: int, iterations: int,
-                       body) -> MethodResult:
+                       body, max_substeps: int | None = None) -> MethodResult:
     """The simulator re-run on each sequence with other substeps and iterations
-    (all else as stored), against the stored ground truth."""
+    (all else as stored), against the stored ground truth: at fixed substeps, or
+    with ``max_substeps`` error-controlled (``XPBDSettings.max_substeps``)."""
     from swingar_pyg.sim import XPBDSettings
 
     errors, seconds, strain = _resimulate(
         sequences, lambda stored: XPBDSettings(**{**stored, "substeps": substeps,
-                                                  "iterations": iterations}), body)
+                                                  "iterations": iterations,
+                                                  "max_substeps": max_substeps}), body)
     reference = sequences[0].settings
-    same = (substeps, iterations) == (reference["substeps"], reference["iterations"])
-    return MethodResult(f"simulator {substeps}x{iterations}", "simulator", errors, seconds,
-                        {"substeps": substeps, "iterations": iterations, "max_strain": strain,
+    same = (substeps, iterations, max_substeps) == (
+        reference["substeps"], reference["iterations"], reference.get("max_substeps"))
+    return MethodResult(f"simulator {setting_name(substeps, iterations, max_substeps)}",
+                        "simulator", errors, seconds,
+                        {"substeps": substeps, "iterations": iterations,
+                         "max_substeps": max_substeps, "max_strain": strain,
                          "is_ground_truth_setting": same})
+
+
+def setting_name(substeps: int, iterations: int, max_substeps: int | None = None) -> str:
+    """``"100x1"``, or ``"100x1:400"`` when frames above the bar are re-run with up to
+    400 substeps."""
+    return f"{substeps}x{iterations}" + (f":{max_substeps}" if max_substeps else "")
 
 
 def evaluate_second_simulator(sequences: list[TestSequence], substeps: int, iterations: int,

@@ -43,7 +43,8 @@ class ReportConfig:
     precisions: tuple[str, ...] = ("fp32",)
     body_sdf: tuple[str, ...] | None = None
     train_missing: bool = True
-    simulator_settings: tuple[tuple[int, int], ...] = ((5, 2), (10, 2), (20, 2), (50, 2))
+    # (substeps, iterations) or (substeps, iterations, max_substeps)
+    simulator_settings: tuple[tuple[int, ...], ...] = ((5, 2), (10, 2), (20, 2), (50, 2))
     simulator_sequences: int = 4
     second_simulator: tuple[int, int] | None = None
     streaming_vertices: tuple[int, ...] = (1000, 5000, 20000)
@@ -92,6 +93,10 @@ class ReportConfig:
             if "neural" in model.collisions and config.body_sdf is None:
                 raise ValueError(f"{path}: model {model.name!r} asks for the neural collision "
                                  "pass but the report names no body_sdf config")
+        for setting in config.simulator_settings:
+            if len(setting) not in (2, 3):
+                raise ValueError(f"{path}: a simulator setting is [substeps, iterations] or "
+                                 f"[substeps, iterations, max_substeps], got {list(setting)}")
         if config.stability not in ("full", "small", "off"):
             raise ValueError(f"{path}: stability must be full, small or off")
         return config
@@ -277,7 +282,8 @@ def run_report(config: ReportConfig, progress: bool = True, log=print) -> Path:
     rigid = evaluate_rigid(sequences)
     log("simulator at other settings")
     chosen = _spread(sequences, config.simulator_sequences)
-    simulator = [evaluate_simulator(chosen, s, i, body) for s, i in config.simulator_settings]
+    simulator = [evaluate_simulator(chosen, substeps, iterations, body, *cap)
+                 for substeps, iterations, *cap in config.simulator_settings]
     speedups = {r.name: equal_error_speedup(_restricted(r, chosen), simulator)
                 for r in results}
     second = None

@@ -13,6 +13,7 @@ import numpy as np
 import torch
 
 from swingar_pyg.atomic import atomic_path
+from swingar_pyg.eval.error_vs_time import setting_name
 
 
 def _write_text(path: Path, text: str) -> None:
@@ -190,7 +191,9 @@ def write_report(out: Path, config, *, machine, test_path, sequences, results, p
     garments = sorted({_garment(s) for s in sequences})
     motions = sorted({_motion(s) for s in sequences})
     frames = sum(len(s.truth) for s in sequences)
-    truth_setting = f"{sequences[0].settings['substeps']}x{sequences[0].settings['iterations']}"
+    stored = sequences[0].settings
+    truth_setting = setting_name(stored["substeps"], stored["iterations"],
+                                 stored.get("max_substeps"))
     lines = [
         f"# Report: {config.name}",
         "",
@@ -201,7 +204,9 @@ def write_report(out: Path, config, *, machine, test_path, sequences, results, p
         "",
         f"Test split `{test_path}`: {len(garments)} garment(s) x {len(motions)} motion(s) "
         f"never seen in training, {len(sequences)} sequences, {frames} frames; ground truth "
-        f"from the XPBD simulator at {truth_setting} (substeps x iterations).",
+        f"from the XPBD simulator at {truth_setting} (substeps x iterations"
+        + (", a frame that ends above the 6 % stretch bar re-run at twice the substeps up to "
+           "the number after the colon" if stored.get("max_substeps") else "") + ").",
         "",
         "Checkpoints: " + "; ".join(f"{k}: `{v}`" for k, v in checkpoints.items()) +
         (f"; body SDF: `{body_sdf}`" if body_sdf else "") + ".",

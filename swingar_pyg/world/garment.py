@@ -88,6 +88,9 @@ class SkirtSpec:
         waist_height: waist above the root joint (the hips), metres.
         clearance: gap kept between body and skirt at rest, metres.
         seed: for the jitter.
+        slit: height of a vent up from the hem at the back, metres (0 for none):
+            the column of cells at the back (``+y``) is left open below it, as a
+            narrow long skirt needs to let the legs take a stride.
     """
 
     length: float = 0.55
@@ -97,6 +100,7 @@ class SkirtSpec:
     waist_height: float = 0.08
     clearance: float = 0.015
     seed: int = 0
+    slit: float = 0.0
 
     def __post_init__(self):
         if not 0.1 <= self.length <= 1.5:
@@ -106,11 +110,14 @@ class SkirtSpec:
         if self.vertices < 64:
             raise ValueError(f"a skirt needs at least 64 vertices, got {self.vertices}")
         check_jitter(self.jitter)
+        if not 0.0 <= self.slit < self.length:
+            raise ValueError(f"slit must be in [0, length = {self.length}) m, got {self.slit}")
 
     @property
     def name(self) -> str:
+        slit = f"-s{self.slit:.2f}" if self.slit else ""
         return (f"{self.family}-l{self.length:.2f}-f{self.flare:.2f}-n{self.vertices}-"
-                f"{topology_tag(self.jitter)}")
+                f"{topology_tag(self.jitter)}{slit}")
 
     @property
     def family(self) -> str:
@@ -235,11 +242,14 @@ def body_envelope(vertices: np.ndarray, keep: np.ndarray, heights: np.ndarray,
 def procedural_skirt(spec: SkirtSpec, body_vertices: np.ndarray, body_faces: np.ndarray,
                      joint_names: tuple[str, ...], skin_indices: np.ndarray,
                      skin_weights: np.ndarray) -> Garment:
-    """Fits ``spec`` around a body (rest-pose ``body_vertices`` and ``body_faces``).
+    r"""Fits ``spec`` around a body (rest-pose ``body_vertices`` and ``body_faces``).
 
     Rings run from the waist (pinned) to the hem; at each ring and angle the radius
     is the larger of the flared profile and the body's envelope
     (:func:`body_envelope`, the convex hull of its cross-section) plus clearance.
+    A slit leaves out the column of cells at the back (centred nearest
+    :math:`\theta = \pi / 2`; the body faces :math:`-y`) in the rows whose top ring
+    lies below ``hem + slit``: a vent one cell (a few centimetres) wide, open at rest.
     """
     body_vertices = np.asarray(body_vertices, dtype=np.float64)
     keep = ~np.isin(dominant_joints(skin_indices, skin_weights),
@@ -279,9 +289,13 @@ def procedural_skirt(spec: SkirtSpec, body_vertices: np.ndarray, body_faces: np.
     flip = np.zeros(corners[0].shape, dtype=bool)
     if spec.jitter > 0:
         flip = np.random.default_rng(spec.seed + 1).random(flip.shape) < 0.5
+    closed = np.ones(corners[0].shape, dtype=bool)
+    back = round(0.75 * segments - 0.5) % segments  # the cell from angles[back] onwards
+    closed[heights[:-1] < heights[-1] + spec.slit - 1e-9, back] = False
     # Outward normals: the ring order runs counter-clockwise seen from above and
     # rows run downwards, so (a, b, c) faces inward; reverse to face outward.
-    mesh = as_mesh(vertices, split_quads(*corners, flip)[:, ::-1])
+    quads = tuple(corner[closed] for corner in corners)
+    mesh = as_mesh(vertices, split_quads(*quads, flip[closed])[:, ::-1])
 
     indices, weights = transfer_skinning(mesh, index[0], body_vertices, joint_names,
                                          skin_indices, skin_weights)
