@@ -96,7 +96,9 @@ def _make_dataset(args: argparse.Namespace) -> int:
     except ValueError:
         raise ValueError(f"--shard must look like 0/4, got {args.shard!r}") from None
     summary = make_dataset(config, args.output, (index, count), args.workers)
-    print(f"{summary['name']}: generated {summary['generated']} sequences, "
+    stale = (f" ({summary['replaced_stale']} replacing parts made from another config or "
+             "simulator revision)" if summary["replaced_stale"] else "")
+    print(f"{summary['name']}: generated {summary['generated']} sequences{stale}, "
           f"kept {summary['skipped_existing']} already on disk, in {summary['seconds']:.0f} s")
     for split, row in summary["splits"].items():
         state = "written" if row["complete"] else "waiting for other shards"

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from swingar_pyg.sim import STRETCH_BAR
-from swingar_pyg.world.dataset import DatasetConfig, make_dataset, plan_jobs
+from swingar_pyg.world.dataset import DatasetConfig, job_recipe, make_dataset, plan_jobs
 
 TINY = """
 name: tiny
@@ -93,6 +93,21 @@ def test_generation_resumes_and_merges(tmp_path):
     assert again['generated'] == 1 and again['skipped_existing'] == 2
     with h5py.File(output / 'train.h5') as file:
         assert np.array_equal(file['sequences/train-00001/garment_vertices'][:], reference)
+    # A part made from another recipe (the config changed since) is simulated again: here
+    # the test garment is longer, and a train part lost its recipe (as parts made before
+    # recipes were recorded have none); the split files are merged from current parts.
+    changed = tiny_config(tmp_path, TINY.replace('length: 0.6', 'length: 0.65'))
+    with h5py.File(output / 'parts' / 'train' / 'train-00000.h5', 'a') as file:
+        del file.attrs['recipe']
+    with pytest.warns(UserWarning, match='2 part file'):
+        third = make_dataset(changed, progress=False)
+    assert third['generated'] == 2 and third['replaced_stale'] == 2
+    assert third['skipped_existing'] == 1
+    with h5py.File(output / 'test.h5') as file:
+        heights = file['garments'][next(iter(file['garments']))]['rest_vertices'][:, 2]
+        assert np.ptp(heights) == pytest.approx(0.65, abs=1e-6)
+    with h5py.File(output / 'parts' / 'train' / 'train-00001.h5') as file:
+        assert file.attrs['recipe'] == job_recipe(plan_jobs(changed)[1], changed)
 
 
 def test_shards_split_the_jobs_and_merge_when_all_are_done(tmp_path):

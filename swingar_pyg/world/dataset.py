@@ -2,7 +2,9 @@
 
 Generation is a list of jobs (one sequence each) in a fixed order. Each job writes
 its own part file atomically, so a killed run resumes where it stopped and never
-keeps half a sequence; ``--shard i/n`` takes every n-th job for spreading over
+keeps half a sequence; each part records its recipe (garment, motion, body shape,
+frame rate, length, solver settings, simulator revision), and a part whose recipe
+is not the config's (the config or the simulator changed since) is simulated again; ``--shard i/n`` takes every n-th job for spreading over
 machines; worker processes (one torch thread each) share a machine. When every
 part of a split exists, the parts are merged into ``<output>/<split>.h5``.
 Splits are by garment and by motion: the config lists each split's own garments
@@ -14,6 +16,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import time
+import warnings
 from collections import Counter
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
@@ -25,7 +28,7 @@ import numpy as np
 
 from swingar_pyg.atomic import atomic_path
 from swingar_pyg.sim.recording import STRETCH_BAR, sequence_stretch_by_place
-from swingar_pyg.sim.xpbd import XPBDSettings
+from swingar_pyg.sim.xpbd import SIMULATOR_REVISION, XPBDSettings
 from swingar_pyg.world.garment import garment_spec
 from swingar_pyg.world.sequence_file import merge_sequence_files, write_sequences
 
@@ -119,7 +122,28 @@ def _part_path(output: Path, job: Job) -> Path:
     return output / "parts" / job.split / f"{job.id}.h5"
 
 
-def _run_job(job: Job, fps: float, seconds: float, solver: XPBDSettings, part: str) -> dict:
+def job_recipe(job: Job, config: DatasetConfig) -> str:
+    """Everything a job's sequence is made from, as JSON: the garment spec, the motion,
+    the body shape, frame rate, length, solver settings and simulator revision."""
+    garment = [type(job.garment).__name__, dataclasses.asdict(job.garment)]
+    return json.dumps({"garment": garment, "motion": dataclasses.asdict(job.motion),
+                       "shape": list(job.shape), "fps": config.fps, "seconds": config.seconds,
+                       "solver": dataclasses.asdict(config.solver),
+                       "simulator_revision": SIMULATOR_REVISION}, sort_keys=True)
+
+
+def _is_current(part: Path, recipe: str) -> bool:
+    """Whether ``part`` exists and was made from ``recipe``."""
+    import h5py
+
+    if not part.exists():
+        return False
+    with h5py.File(part, "r") as file:
+        return file.attrs.get("recipe") == recipe
+
+
+def _run_job(job: Job, fps: float, seconds: float, solver: XPBDSettings, part: str,
+             recipe: str) -> dict:
     import torch
 
     from swingar_pyg.world.body import AnnyBody
@@ -137,7 +161,7 @@ def _run_job(job: Job, fps: float, seconds: float, solver: XPBDSettings, part: s
                          mirror=job.motion.mirror)
     sequence = simulate_sequence(body, shape, garment, motion, solver)
     sequence = sequence.with_exact_penetration(body.faces)
-    write_sequences(part, [sequence], ids=[job.id])
+    write_sequences(part, [sequence], ids=[job.id], attrs={"recipe": recipe})
     result = sequence.result
     places = sequence_stretch_by_place(garment.mesh, garment.pinned, result.positions,
                                        sequence.body_vertices)
@@ -164,7 +188,12 @@ def make_dataset(config: DatasetConfig, output: str | Path | None = None,
     output = Path(output or config.output)
     jobs = plan_jobs(config)
     mine = [job for k, job in enumerate(jobs) if k % count == index]
-    todo = [job for job in mine if not _part_path(output, job).exists()]
+    recipes = {job.id: job_recipe(job, config) for job in jobs}
+    todo = [job for job in mine if not _is_current(_part_path(output, job), recipes[job.id])]
+    stale = sum(_part_path(output, job).exists() for job in todo)
+    if stale:
+        warnings.warn(f"{stale} part file(s) under {output / 'parts'} were made from another "
+                      "config or simulator revision; simulating them again", stacklevel=2)
     start = time.perf_counter()
     reports = []
     if todo:
@@ -175,7 +204,7 @@ def make_dataset(config: DatasetConfig, output: str | Path | None = None,
             bar = tqdm(total=len(todo), desc=f"{config.name} shard {index}/{count}",
                        unit="sequence")
         arguments = [(job, config.fps, config.seconds, config.solver,
-                      str(_part_path(output, job))) for job in todo]
+                      str(_part_path(output, job)), recipes[job.id]) for job in todo]
         for job in todo:
             _part_path(output, job).parent.mkdir(parents=True, exist_ok=True)
         if workers == 1:
@@ -195,12 +224,15 @@ def make_dataset(config: DatasetConfig, output: str | Path | None = None,
 
     summary: dict = {"name": config.name, "output": str(output), "shard": f"{index}/{count}",
                      "generated": len(reports), "skipped_existing": len(mine) - len(todo),
+                     "replaced_stale": stale,
                      "seconds": time.perf_counter() - start, "splits": {}}
     for split in SPLITS:
-        parts = [_part_path(output, job) for job in jobs if job.split == split]
-        if not parts:
+        split_jobs = [job for job in jobs if job.split == split]
+        if not split_jobs:
             continue
-        complete = all(p.exists() for p in parts)
+        parts = [_part_path(output, job) for job in split_jobs]
+        complete = all(_is_current(_part_path(output, job), recipes[job.id])
+                       for job in split_jobs)
         if complete:
             merge_sequence_files(parts, output / f"{split}.h5")
         summary["splits"][split] = {"sequences": len(parts), "complete": complete,

@@ -2,6 +2,7 @@
 
 Layout::
 
+    /                 attrs: what the writer adds (a dataset part: its recipe, JSON)
     /garments/<name>/ rest_vertices (N,3) faces (F,3) pinned (P,) skin_indices (N,K)
                       skin_weights (N,K) fit (N,) [signed distance to the rest body]
     /sequences/<id>/  garment_vertices (T,N,3) [chunked by frame, gzip]
@@ -32,9 +33,10 @@ _COMPRESSION = {"compression": "gzip", "compression_opts": 4}
 
 
 def write_sequences(path: str | Path, sequences: list[SimulatedSequence],
-                    ids: list[str] | None = None) -> Path:
+                    ids: list[str] | None = None, attrs: dict[str, str] | None = None) -> Path:
     """Writes ``sequences`` (and each garment once) to a new HDF5 file at ``path``,
-    as ``/sequences/<id>`` (default ids: ``000000``, ``000001``, ...)."""
+    as ``/sequences/<id>`` (default ids: ``000000``, ``000001``, ...), with ``attrs``
+    on the file's root."""
     import h5py
 
     path = Path(path)
@@ -43,6 +45,7 @@ def write_sequences(path: str | Path, sequences: list[SimulatedSequence],
         raise ValueError("give one distinct id per sequence")
     with atomic_path(path) as tmp:
         with h5py.File(tmp, "w") as file:
+            file.attrs.update(attrs or {})
             for sequence_id, sequence in zip(ids, sequences):
                 garment = sequence.garment
                 if garment.name not in file.get("garments", {}):
