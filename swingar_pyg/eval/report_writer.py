@@ -205,8 +205,9 @@ def write_report(out: Path, config, *, machine, test_path, sequences, results, p
         f"Test split `{test_path}`: {len(garments)} garment(s) x {len(motions)} motion(s) "
         f"never seen in training, {len(sequences)} sequences, {frames} frames; ground truth "
         f"from the XPBD simulator at {truth_setting} (substeps x iterations"
-        + (", a frame that ends above the 6 % stretch bar re-run at twice the substeps up to "
-           "the number after the colon" if stored.get("max_substeps") else "") + ").",
+        + (f", a frame that ends above {100 * stored['target_stretch']:g} % stretch re-run at "
+           "twice the substeps up to the number after the colon"
+           if stored.get("max_substeps") else "") + ").",
         "",
         "Checkpoints: " + "; ".join(f"{k}: `{v}`" for k, v in checkpoints.items()) +
         (f"; body SDF: `{body_sdf}`" if body_sdf else "") + ".",

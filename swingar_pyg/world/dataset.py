@@ -4,9 +4,10 @@ Generation is a list of jobs (one sequence each) in a fixed order. Each job writ
 its own part file atomically, so a killed run resumes where it stopped and never
 keeps half a sequence; each part records its recipe (garment, motion, body shape,
 frame rate, length, solver settings, simulator revision), and a part whose recipe
-is not the config's (the config or the simulator changed since) is simulated again; ``--shard i/n`` takes every n-th job for spreading over
-machines; worker processes (one torch thread each) share a machine. When every
-part of a split exists, the parts are merged into ``<output>/<split>.h5``.
+is not the config's (the config or the simulator changed since) is simulated
+again. ``--shard i/n`` takes every n-th job for spreading over machines; worker
+processes (one torch thread each) share a machine. When every part of a split is
+current, the parts are merged into ``<output>/<split>.h5``.
 Splits are by garment and by motion: the config lists each split's own garments
 and motions, and :func:`plan_jobs` refuses a garment or motion in two splits.
 """
@@ -231,8 +232,9 @@ def make_dataset(config: DatasetConfig, output: str | Path | None = None,
         if not split_jobs:
             continue
         parts = [_part_path(output, job) for job in split_jobs]
-        complete = all(_is_current(_part_path(output, job), recipes[job.id])
-                       for job in split_jobs)
+        # re-read: parts of other shards may have landed while this one ran
+        complete = all(_is_current(part, recipes[job.id])
+                       for part, job in zip(parts, split_jobs))
         if complete:
             merge_sequence_files(parts, output / f"{split}.h5")
         summary["splits"][split] = {"sequences": len(parts), "complete": complete,
