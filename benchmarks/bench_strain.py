@@ -4,6 +4,7 @@
     OMP_NUM_THREADS=1 python benchmarks/bench_strain.py --quick    # 300 vertices, 1 s, 2 motions
     OMP_NUM_THREADS=1 python benchmarks/bench_strain.py --jitter 0.3  # irregular triangulation
     OMP_NUM_THREADS=1 python benchmarks/bench_strain.py --settings 100x1 100x1:400  # error control
+    OMP_NUM_THREADS=1 python benchmarks/bench_strain.py --settings 100x1:400 100x1:400/0.9  # stall
 
 Scene: a procedural knee-length skirt (a quad grid, or with ``--jitter`` an irregular
 triangulation as in the datasets) on the default anny body doing each motion of ``MOTIONS``
@@ -28,11 +29,15 @@ another skirt (the quickstart's narrow long one is ``--length 0.75 --flare 0.15`
 
 A setting ``SxI:M`` runs ``S`` substeps of ``I`` sweeps and re-runs each frame that ends above
 the bar at twice the substeps, up to ``M`` (``XPBDSettings.max_substeps``); its runs record
-the mean substeps a frame, and the cost is the mean wall time a frame (re-runs included).
+the mean substeps a frame, and the cost is the mean wall time a frame (re-runs included);
+``SxI:M/R`` also stops the doubling once a re-run fails to lower the frame's largest strain
+below ``R`` times the previous run's (``XPBDSettings.stall_ratio``). Each run records the
+share of its frames that end above the bar (``frames_above_bar``).
 
 Writes ``benchmarks/results/bench_strain.json`` and ``bench_strain.png`` (``bench_strain_jitter``
 with ``--jitter``, ``bench_strain_l0.75_f0.15`` for another skirt, ``_s0.3`` after it with a
-slit, ``_adaptive`` when a setting has ``:M``), with the simulator revision that made them.
+slit, ``_adaptive`` when a setting has ``:M``, then ``_stall`` with ``/R``), with the
+simulator revision that made them.
 """
 
 from __future__ import annotations
@@ -63,7 +68,8 @@ from swingar_pyg.world.sequence import simulate_sequence  # noqa: E402
 
 MOTIONS = [("sway", 1.0), ("twist", 1.0), ("spin_stop", 1.0), ("walk", 1.0), ("jump", 1.0),
            ("kick", 0.7), ("kick", 1.0)]
-SETTINGS = [(50, 2, None), (100, 1, None), (100, 2, None), (200, 1, None), (50, 4, None)]
+SETTINGS = [(50, 2, None, None), (100, 1, None, None), (100, 2, None, None),
+            (200, 1, None, None), (50, 4, None, None)]
 PERTURBATION = 1e-6  # metres
 PLACES = ("near_pins", "touching", "free")  # the keys of stretch_by_place
 
@@ -76,7 +82,7 @@ def _body() -> AnnyBody:
 
 def run(vertices: int, jitter: float, length: float, flare: float, slit: float, motion: str,
         amplitude: float, seconds: float, substeps: int, iterations: int,
-        max_substeps: int | None, repeat: int) -> dict:
+        max_substeps: int | None, stall_ratio: float | None, repeat: int) -> dict:
     """One simulated sequence and its strain figures."""
     body = _body()
     shape = body.default_shape()
@@ -84,14 +90,15 @@ def run(vertices: int, jitter: float, length: float, flare: float, slit: float, 
     garment = perturbed(fit_procedural_skirt(spec, body, shape), PERTURBATION, seed=repeat)
     sequence = procedural_motion(motion, body.joint_names, seconds=seconds, amplitude=amplitude)
     settings = XPBDSettings(fps=sequence.fps, substeps=substeps, iterations=iterations,
-                            max_substeps=max_substeps)
+                            max_substeps=max_substeps, stall_ratio=stall_ratio)
     simulated = simulate_sequence(body, shape, garment, sequence, settings)
     result = simulated.result
     edges, strain = garment_edge_strain(garment.mesh, result.positions)
     places = stretch_by_place(strain, edges, garment.pinned, garment.mesh.num_vertices,
                               nearest_body_distance(result.positions, simulated.body_vertices))
     return {"motion": motion, "amplitude": amplitude, "substeps": substeps,
-            "iterations": iterations, "max_substeps": max_substeps, "repeat": repeat,
+            "iterations": iterations, "max_substeps": max_substeps,
+            "stall_ratio": stall_ratio, "repeat": repeat,
             "ms_per_frame": 1e3 * float(np.median(result.seconds_per_frame)),
             "mean_ms_per_frame": 1e3 * float(np.mean(result.seconds_per_frame)),
             "mean_substeps": float(np.mean(result.substeps_per_frame)),
@@ -99,6 +106,7 @@ def run(vertices: int, jitter: float, length: float, flare: float, slit: float, 
             **{f"max_stretch_{place}": value for place, value in places.items()},
             "p999_strain": float(strain.abs().flatten().quantile(0.999)),
             "mean_strain": float(strain.abs().mean()),
+            "frames_above_bar": float(np.mean(result.max_stretch > STRETCH_BAR)),
             "max_penetration": float(np.nanmax(result.penetration))}
 
 
@@ -106,14 +114,16 @@ def summarise(runs: list[dict]) -> list[dict]:
     """Median and range over the repeats of each motion and setting."""
     groups: dict[tuple, list[dict]] = {}
     for r in runs:
-        groups.setdefault((r["motion"], r["amplitude"], r["substeps"], r["iterations"],
-                           r["max_substeps"]), []).append(r)
+        groups.setdefault((r["motion"], r["amplitude"], *_setting(r)), []).append(r)
     rows = []
-    for (motion, amplitude, substeps, iterations, max_substeps), group in groups.items():
+    for (motion, amplitude, substeps, iterations, max_substeps, stall_ratio), group in (
+            groups.items()):
         row = {"motion": motion, "amplitude": amplitude, "substeps": substeps,
-               "iterations": iterations, "max_substeps": max_substeps, "repeats": len(group)}
+               "iterations": iterations, "max_substeps": max_substeps,
+               "stall_ratio": stall_ratio, "repeats": len(group)}
         for key in ("ms_per_frame", "mean_ms_per_frame", "mean_substeps", "max_stretch",
-                    "max_compression", "p999_strain", "mean_strain", "max_penetration",
+                    "max_compression", "p999_strain", "mean_strain", "frames_above_bar",
+                    "max_penetration",
                     *(f"max_stretch_{place}" for place in PLACES)):
             values = np.array([r[key] for r in group])
             row[key] = {"median": float(np.median(values)), "min": float(values.min()),
@@ -126,24 +136,39 @@ def label(row: dict) -> str:
     return row["motion"] + (f" a{row['amplitude']:g}" if row["amplitude"] != 1.0 else "")
 
 
-def setting_label(setting: tuple[int, int, int | None]) -> str:
-    """``SxI``, or ``SxI:M`` for substeps doubled up to ``M`` where a frame breaks the bar."""
-    substeps, iterations, max_substeps = setting
-    return f"{substeps}x{iterations}" + (f":{max_substeps}" if max_substeps else "")
+Setting = tuple[int, int, int | None, float | None]  # substeps, iterations, cap, stall
 
 
-def parse_setting(text: str) -> tuple[int, int, int | None]:
+def setting_label(setting: Setting) -> str:
+    """``SxI``, ``SxI:M`` for substeps doubled up to ``M`` where a frame breaks the bar,
+    ``SxI:M/R`` with the doubling stopped where a re-run gains less than ``R``."""
+    substeps, iterations, max_substeps, stall_ratio = setting
+    return (f"{substeps}x{iterations}" + (f":{max_substeps}" if max_substeps else "")
+            + (f"/{stall_ratio:g}" if stall_ratio else ""))
+
+
+def parse_setting(text: str) -> Setting:
     """The inverse of :func:`setting_label`."""
+    bad = ValueError("--settings takes SUBSTEPSxITERATIONS[:MAX_SUBSTEPS[/STALL_RATIO]], "
+                     f"got {text!r}")
     fixed, _, adaptive = text.lower().partition(":")
+    cap, _, stall = adaptive.partition("/")
     numbers = fixed.split("x")
     if len(numbers) != 2 or not all(n.isdigit() for n in numbers) or (
-            adaptive and not adaptive.isdigit()):
-        raise ValueError(f"--settings takes SUBSTEPSxITERATIONS[:MAX_SUBSTEPS], got {text!r}")
-    return int(numbers[0]), int(numbers[1]), int(adaptive) if adaptive else None
+            adaptive and not cap.isdigit()):
+        raise bad
+    try:
+        stall_ratio = float(stall) if stall else None
+    except ValueError:
+        raise bad from None
+    setting = int(numbers[0]), int(numbers[1]), int(cap) if cap else None, stall_ratio
+    XPBDSettings(substeps=setting[0], iterations=setting[1], max_substeps=setting[2],
+                 stall_ratio=stall_ratio)  # its ValueError names a bad value
+    return setting
 
 
-def _setting(row: dict) -> tuple[int, int, int | None]:
-    return row["substeps"], row["iterations"], row["max_substeps"]
+def _setting(row: dict) -> Setting:
+    return row["substeps"], row["iterations"], row["max_substeps"], row.get("stall_ratio")
 
 
 def plot(rows: list[dict]):
@@ -179,6 +204,7 @@ def plot(rows: list[dict]):
     cost_axis.set(xticks=range(len(settings)),
                   xticklabels=[setting_label(s) for s in settings],
                   ylabel="mean ms per frame (median over motions)", title="cost")
+    cost_axis.tick_params(axis="x", labelrotation=20, labelsize=8)
     for axis in (stretch_axis, cost_axis):
         axis.grid(alpha=0.3, axis="y")
     figure.tight_layout()
@@ -199,9 +225,10 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=3.0)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--jobs", type=int, default=2, help="worker processes, one thread each")
-    parser.add_argument("--settings", nargs="+", metavar="SxI[:M]",
+    parser.add_argument("--settings", nargs="+", metavar="SxI[:M[/R]]",
                         help="substeps x iterations to run, :M to double the substeps up to "
-                        "M on frames that end above the bar (default: " +
+                        "M on frames that end above the bar, /R to stop doubling where a "
+                        "re-run gains less than a factor R (default: " +
                         " ".join(setting_label(s) for s in SETTINGS) + ")")
     parser.add_argument("--motions", nargs="+", metavar="NAME[@AMPLITUDE]",
                         help="motions to run (default: " +
@@ -220,8 +247,8 @@ def main() -> None:
         raise ValueError("--vertices must be >= 64, --seconds > 0, --repeats and --jobs >= 1")
 
     tasks = [(args.vertices, args.jitter, args.length, args.flare, args.slit, motion, amplitude,
-              args.seconds, substeps, iterations, max_substeps, repeat)
-             for motion, amplitude in motions for substeps, iterations, max_substeps in settings
+              args.seconds, *setting, repeat)
+             for motion, amplitude in motions for setting in settings
              for repeat in range(args.repeats)]
     with ProcessPoolExecutor(args.jobs) as pool:
         runs = []
@@ -229,7 +256,8 @@ def main() -> None:
             runs.append(r)
             print(f"{r['motion']:>9} a{r['amplitude']:g} {setting_label(_setting(r)):>9} "
                   f"#{r['repeat']}: {r['mean_ms_per_frame']:6.1f} ms/frame "
-                  f"({r['mean_substeps']:.0f} substeps), stretch "
+                  f"({r['mean_substeps']:.0f} substeps), frames above the bar "
+                  f"{100 * r['frames_above_bar']:4.1f} %, stretch "
                   f"{100 * r['max_stretch']:5.1f} %, compression {100 * r['max_compression']:5.1f}"
                   f" %, p99.9 {100 * r['p999_strain']:4.2f} %, inside "
                   f"{100 * r['max_penetration']:.2f} %; stretch near pins / touching / free "
@@ -245,6 +273,7 @@ def main() -> None:
     shape += f"_s{args.slit:g}" if args.slit else ""
     stem = ("bench_strain" + ("_jitter" if args.jitter else "") + shape
             + ("_adaptive" if any(s[2] for s in settings) else "")
+            + ("_stall" if any(s[3] for s in settings) else "")
             + ("_quick" if args.quick else ""))
     path = write_results(stem, payload, plot(rows))
     print(f"wrote {path} and its .png")

@@ -67,6 +67,10 @@ def _simulate(args: argparse.Namespace) -> int:
         if args.solver != "xpbd":
             raise ValueError("--max-substeps is XPBD's error control; VBD runs fixed substeps")
         steps["max_substeps"] = args.max_substeps
+    if args.stall_ratio is not None:
+        if not args.max_substeps:
+            raise ValueError("--stall-ratio stops --max-substeps' doubling early; give both")
+        steps["stall_ratio"] = args.stall_ratio
     settings = solver(fps=args.fps, **steps)
     sequence = simulate_sequence(body, shape, garment, motion, settings, progress=True)
     out = Path(args.out)
@@ -206,6 +210,11 @@ def build_parser() -> argparse.ArgumentParser:
     simulate.add_argument("--max-substeps", type=int, default=None,
                           help="XPBD: re-run a frame that ends above the 6 %% stretch bar at "
                                "twice the substeps, up to this many (default: fixed substeps)")
+    simulate.add_argument("--stall-ratio", type=float, default=None,
+                          help="XPBD, with --max-substeps: stop doubling once a re-run ends "
+                               "above this times the previous run's largest strain, and "
+                               "keep the frame's least stretched run (default: double up to "
+                               "the cap)")
     simulate.add_argument("--out", default="runs/simulate", help="output folder")
     simulate.add_argument("--no-preview", dest="preview", action="store_false")
     simulate.set_defaults(run=_simulate)

@@ -74,6 +74,19 @@ def test_simulate_with_error_controlled_substeps_records_them(tmp_path, capsys):
         stretch = sequence['max_stretch'][:]
     assert set(used.tolist()) <= {2, 4, 8, 16} and used.max() > 2
     assert (stretch[used < 16] <= 0.06).all()
+    # A stall ratio no re-run can meet (a largest strain below 1e-3 of the last) stops
+    # every frame's doubling at its first re-run.
+    assert main(['simulate', '--motion', 'kick', '--seconds', '0.3', '--vertices', '150',
+                 '--substeps', '2', '--max-substeps', '16', '--stall-ratio', '0.001',
+                 '--no-preview', '--out', str(out / 'stall')]) == 0
+    with h5py.File(out / 'stall' / 'sequence.h5') as file:
+        sequence = file['sequences/000000']
+        assert json.loads(sequence.attrs['settings'])['stall_ratio'] == 0.001
+        kept = set(sequence['substeps_per_frame'][:].tolist())
+    assert kept <= {2, 4} and 4 in kept
+    with pytest.raises(SystemExit):
+        main(['simulate', '--stall-ratio', '0.9', '--out', str(out)])
+    assert '--stall-ratio stops' in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main(['simulate', '--solver', 'vbd', '--max-substeps', '20', '--out', str(out)])
     assert '--max-substeps is XPBD' in capsys.readouterr().err

@@ -99,6 +99,29 @@ def test_frames_above_the_target_stretch_are_rerun_at_more_substeps():
     assert torch.equal(lenient.positions, fixed.positions)
 
 
+def test_a_stalled_rerun_stops_the_doubling_and_keeps_the_least_stretched_run():
+    mesh, top = hanging_sheet()
+    initial = torch.from_numpy(mesh.vertices).float()
+    pulled = initial[top].clone()
+    pulled[:, 0] *= 1.1  # the pinned top edge held 10 % long: no substep count relaxes it
+    targets = pulled.expand(6, -1, -1)
+    coarse = XPBDSettings(fps=7.5, substeps=5, settle_frames=0)
+    fixed = {n: run(mesh, top, frames=1, targets=targets,
+                    settings=dataclasses.replace(coarse, substeps=n))[1] for n in (5, 10)}
+    assert fixed[10].max_stretch[0] > 0.9 * fixed[5].max_stretch[0] > 0.06  # stalled
+    _, to_cap = run(mesh, top, frames=6, targets=targets,
+                    settings=dataclasses.replace(coarse, max_substeps=80))
+    assert (to_cap.substeps_per_frame == 80).all()
+    _, stalled = run(mesh, top, frames=6, targets=targets,
+                     settings=dataclasses.replace(coarse, max_substeps=80, stall_ratio=0.9))
+    assert set(stalled.substeps_per_frame.tolist()) <= {5, 10, 20}
+    assert stalled.seconds_per_frame.sum() < to_cap.seconds_per_frame.sum()
+    # Frame 0 starts from the same state in every run: it keeps the better of 5 and 10.
+    best = min(fixed.values(), key=lambda result: result.max_stretch[0])
+    assert stalled.substeps_per_frame[0] == best.substeps_per_frame[0]
+    assert torch.equal(stalled.positions[0], best.positions[0])
+
+
 def test_all_pinned_edges_at_zero_compliance_do_not_divide_zero_by_zero():
     mesh, _ = hanging_sheet(4, 4)
     everything = np.arange(mesh.num_vertices)
@@ -133,6 +156,7 @@ def test_cloth_dropped_on_a_sphere_does_not_enter_it():
     ({'damping': float('nan')}, 'damping must be finite'),
     ({'substeps': 50, 'max_substeps': 20}, 'max_substeps must be None or >= substeps'),
     ({'target_stretch': 0.0}, 'target_stretch must be finite and > 0'),
+    ({'stall_ratio': 1.5}, r'stall_ratio must be None or in \(0, 1\]'),
 ])
 def test_bad_settings_raise(kwargs, message):
     with pytest.raises(ValueError, match=message):

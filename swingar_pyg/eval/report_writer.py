@@ -207,6 +207,9 @@ def write_report(out: Path, config, *, machine, test_path, sequences, results, p
         f"from the XPBD simulator at {truth_setting} (substeps x iterations"
         + (f", a frame that ends above {100 * stored['target_stretch']:g} % stretch re-run at "
            "twice the substeps up to the number after the colon"
+           + (f", until a re-run ends above {stored['stall_ratio']:g} times the previous "
+              "run's largest strain (the frame keeps its least stretched run)"
+              if stored.get("stall_ratio") else "")
            if stored.get("max_substeps") else "") + ").",
         "",
         "Checkpoints: " + "; ".join(f"{k}: `{v}`" for k, v in checkpoints.items()) +

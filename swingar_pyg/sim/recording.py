@@ -31,8 +31,9 @@ class SimulationResult:
         seconds_per_frame: ``(T,)`` wall time of each frame.
         max_stretch, mean_stretch: ``(T,)`` edge strain ``|l / L - 1|``.
         penetration: ``(T,)`` fraction of free vertices inside the body (NaN without body).
-        substeps_per_frame: ``(T,)`` solver substeps each frame was run with (the last run
-            of a frame the solver re-ran at more substeps).
+        substeps_per_frame: ``(T,)`` solver substeps each frame was run with (the kept
+            run of a frame the solver re-ran at more substeps; ``seconds_per_frame``
+            counts all its runs).
         settings: the solver settings.
     """
 
