@@ -5,7 +5,8 @@ its own part file atomically, so a killed run resumes where it stopped and never
 keeps half a sequence; each part records its recipe (garment, motion, body shape,
 frame rate, length, solver settings, simulator revision), and a part whose recipe
 is not the config's (the config or the simulator changed since) is simulated
-again. ``--shard i/n`` takes every n-th job for spreading over machines; worker
+again (a solver setting added since a part was made counts as its default, which
+keeps the simulation as it was). ``--shard i/n`` takes every n-th job for spreading over machines; worker
 processes (one torch thread each) share a machine. When every part of a split is
 current, the parts are merged into ``<output>/<split>.h5``.
 Splits are by garment and by motion: the config lists each split's own garments
@@ -134,13 +135,25 @@ def job_recipe(job: Job, config: DatasetConfig) -> str:
 
 
 def _is_current(part: Path, recipe: str) -> bool:
-    """Whether ``part`` exists and was made from ``recipe``."""
+    """Whether ``part`` exists and was made from ``recipe``. A solver setting the part's
+    recipe lacks counts as its default: settings are added with defaults that keep the
+    simulation as it was."""
     import h5py
 
     if not part.exists():
         return False
     with h5py.File(part, "r") as file:
-        return file.attrs.get("recipe") == recipe
+        stored = file.attrs.get("recipe")
+    if stored is None:
+        return False
+    return _with_solver_defaults(stored) == _with_solver_defaults(recipe)
+
+
+def _with_solver_defaults(recipe: str) -> dict:
+    defaults = json.loads(json.dumps(dataclasses.asdict(XPBDSettings())))
+    parsed = json.loads(recipe)
+    parsed["solver"] = {**defaults, **parsed["solver"]}
+    return parsed
 
 
 def _run_job(job: Job, fps: float, seconds: float, solver: XPBDSettings, part: str,
