@@ -122,6 +122,24 @@ def test_a_stalled_rerun_stops_the_doubling_and_keeps_the_least_stretched_run():
     assert torch.equal(stalled.positions[0], best.positions[0])
 
 
+def test_a_non_finite_run_is_never_the_one_kept(monkeypatch):
+    mesh, top = hanging_sheet()
+    initial = torch.from_numpy(mesh.vertices).float()
+    cloth = XPBDCloth(mesh, top, XPBDSettings(fps=7.5, substeps=5, settle_frames=0,
+                                              max_substeps=20, stall_ratio=0.9))
+    solve = cloth._frame
+
+    def first_run_blows_up(x, v, *args):
+        end_x, end_v = solve(x, v, *args)
+        return (torch.full_like(end_x, float('nan')), end_v) if args[-1].substeps == 5 else (
+            end_x, end_v)
+
+    monkeypatch.setattr(cloth, '_frame', first_run_blows_up)
+    result = cloth.simulate(initial, initial[top].expand(3, -1, -1))
+    assert torch.isfinite(result.positions).all()
+    assert set(result.substeps_per_frame.tolist()) <= {10, 20}
+
+
 def test_all_pinned_edges_at_zero_compliance_do_not_divide_zero_by_zero():
     mesh, _ = hanging_sheet(4, 4)
     everything = np.arange(mesh.num_vertices)

@@ -405,7 +405,8 @@ class XPBDCloth:
                                        settling, self._substep(substeps))
             if s.max_substeps is None:
                 return end_x, end_v, substeps
-            largest = float(self.strain(end_x).max())
+            # a non-finite run counts as infinitely stretched: never the one kept
+            largest = float(self.strain(end_x).max().nan_to_num(nan=float("inf")))
             stalled = (s.stall_ratio is not None and bool(runs)
                        and largest > s.stall_ratio * runs[-1][0])
             runs.append((largest, end_x, end_v, substeps))
