@@ -6,9 +6,9 @@ keeps half a sequence; each part records its recipe (garment, motion, body shape
 frame rate, length, solver settings, simulator revision), and a part whose recipe
 is not the config's (the config or the simulator changed since) is simulated
 again (a solver setting added since a part was made counts as its default, which
-keeps the simulation as it was). ``--shard i/n`` takes every n-th job for spreading over machines; worker
-processes (one torch thread each) share a machine. When every part of a split is
-current, the parts are merged into ``<output>/<split>.h5``.
+keeps the simulation as it was). ``--shard i/n`` takes every n-th job for spreading
+over machines; worker processes (one torch thread each) share a machine. When every
+part of a split is current, the parts are merged into ``<output>/<split>.h5``.
 Splits are by garment and by motion: the config lists each split's own garments
 and motions, and :func:`plan_jobs` refuses a garment or motion in two splits.
 """
@@ -146,10 +146,12 @@ def _is_current(part: Path, recipe: str) -> bool:
         stored = file.attrs.get("recipe")
     if stored is None:
         return False
-    return _with_solver_defaults(stored) == _with_solver_defaults(recipe)
+    # the config's own recipe, from job_recipe, already names every setting
+    return _with_solver_defaults(stored) == json.loads(recipe)
 
 
 def _with_solver_defaults(recipe: str) -> dict:
+    """``recipe`` parsed, its solver settings completed by :class:`XPBDSettings`' defaults."""
     defaults = json.loads(json.dumps(dataclasses.asdict(XPBDSettings())))
     parsed = json.loads(recipe)
     parsed["solver"] = {**defaults, **parsed["solver"]}
