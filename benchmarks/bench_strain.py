@@ -53,7 +53,14 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import machine_info, perturbed, write_results  # noqa: E402
+from common import (  # noqa: E402
+    Setting,
+    machine_info,
+    parse_setting,
+    perturbed,
+    setting_label,
+    write_results,
+)
 
 from swingar_pyg.sim import SIMULATOR_REVISION, STRETCH_BAR, XPBDSettings  # noqa: E402
 from swingar_pyg.sim.recording import (  # noqa: E402
@@ -134,37 +141,6 @@ def summarise(runs: list[dict]) -> list[dict]:
 
 def label(row: dict) -> str:
     return row["motion"] + (f" a{row['amplitude']:g}" if row["amplitude"] != 1.0 else "")
-
-
-Setting = tuple[int, int, int | None, float | None]  # substeps, iterations, cap, stall
-
-
-def setting_label(setting: Setting) -> str:
-    """``SxI``, ``SxI:M`` for substeps doubled up to ``M`` where a frame breaks the bar,
-    ``SxI:M/R`` with the doubling stopped where a re-run gains less than ``R``."""
-    substeps, iterations, max_substeps, stall_ratio = setting
-    return (f"{substeps}x{iterations}" + (f":{max_substeps}" if max_substeps else "")
-            + (f"/{stall_ratio:g}" if stall_ratio else ""))
-
-
-def parse_setting(text: str) -> Setting:
-    """The inverse of :func:`setting_label`."""
-    bad = ValueError("--settings takes SUBSTEPSxITERATIONS[:MAX_SUBSTEPS[/STALL_RATIO]], "
-                     f"got {text!r}")
-    fixed, _, adaptive = text.lower().partition(":")
-    cap, _, stall = adaptive.partition("/")
-    numbers = fixed.split("x")
-    if len(numbers) != 2 or not all(n.isdigit() for n in numbers) or (
-            adaptive and not cap.isdigit()):
-        raise bad
-    try:
-        stall_ratio = float(stall) if stall else None
-    except ValueError:
-        raise bad from None
-    setting = int(numbers[0]), int(numbers[1]), int(cap) if cap else None, stall_ratio
-    XPBDSettings(substeps=setting[0], iterations=setting[1], max_substeps=setting[2],
-                 stall_ratio=stall_ratio)  # its ValueError names a bad value
-    return setting
 
 
 def _setting(row: dict) -> Setting:

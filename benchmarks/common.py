@@ -17,6 +17,7 @@ import torch
 
 from swingar_pyg.atomic import atomic_path
 from swingar_pyg.geometry import as_mesh
+from swingar_pyg.sim import XPBDSettings
 from swingar_pyg.world.garment import Garment
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -70,3 +71,34 @@ def perturbed(garment: Garment, scale: float, seed: int = 0) -> Garment:
     vertices = garment.mesh.vertices + scale * np.random.default_rng(seed).standard_normal(
         garment.mesh.vertices.shape)
     return dataclasses.replace(garment, mesh=as_mesh(vertices, garment.mesh.faces))
+
+
+Setting = tuple[int, int, int | None, float | None]  # substeps, iterations, cap, stall
+
+
+def setting_label(setting: Setting) -> str:
+    """``SxI``, ``SxI:M`` for substeps doubled up to ``M`` where a frame breaks the bar,
+    ``SxI:M/R`` with the doubling stopped where a re-run gains less than ``R``."""
+    substeps, iterations, max_substeps, stall_ratio = setting
+    return (f"{substeps}x{iterations}" + (f":{max_substeps}" if max_substeps else "")
+            + (f"/{stall_ratio:g}" if stall_ratio else ""))
+
+
+def parse_setting(text: str) -> Setting:
+    """The inverse of :func:`setting_label`."""
+    bad = ValueError("--settings takes SUBSTEPSxITERATIONS[:MAX_SUBSTEPS[/STALL_RATIO]], "
+                     f"got {text!r}")
+    fixed, _, adaptive = text.lower().partition(":")
+    cap, _, stall = adaptive.partition("/")
+    numbers = fixed.split("x")
+    if len(numbers) != 2 or not all(n.isdigit() for n in numbers) or (
+            adaptive and not cap.isdigit()):
+        raise bad
+    try:
+        stall_ratio = float(stall) if stall else None
+    except ValueError:
+        raise bad from None
+    setting = int(numbers[0]), int(numbers[1]), int(cap) if cap else None, stall_ratio
+    XPBDSettings(substeps=setting[0], iterations=setting[1], max_substeps=setting[2],
+                 stall_ratio=stall_ratio)  # its ValueError names a bad value
+    return setting
