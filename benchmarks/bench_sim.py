@@ -1,6 +1,6 @@
 """The ground-truth simulator's own error against run time.
 
-    OMP_NUM_THREADS=1 python benchmarks/bench_sim.py            # ~20 minutes on one core
+    OMP_NUM_THREADS=1 python benchmarks/bench_sim.py            # ~18 minutes on one core
     OMP_NUM_THREADS=1 python benchmarks/bench_sim.py --quick    # one small skirt
 
 Scene: a procedural knee-length skirt on the default anny body doing ``--motion`` (walk by
@@ -64,7 +64,7 @@ def plot(rows: list[dict], reference: str):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from matplotlib.ticker import NullFormatter
+    from matplotlib.ticker import NullFormatter, ScalarFormatter
 
     figure, (error_axis, strain_axis) = plt.subplots(1, 2, figsize=(11, 4))
     for row in rows:
@@ -88,6 +88,8 @@ def plot(rows: list[dict], reference: str):
                    title=f"simulator error vs run time (reference {reference})")
     strain_axis.set(xscale="log", xlabel="ms per frame", ylabel="largest edge strain (%)",
                     title="largest edge strain")
+    error_axis.yaxis.set_major_formatter(ScalarFormatter())
+    error_axis.yaxis.set_minor_formatter(ScalarFormatter())
     for axis in (error_axis, strain_axis):
         axis.xaxis.set_minor_formatter(NullFormatter())
         axis.grid(alpha=0.3, which="both")
