@@ -117,7 +117,7 @@ def test_report_measures_every_method_on_the_same_sequences(tiny_windows, tiny_b
 
 
 def test_equal_error_speedup_interpolates_the_simulator_curve():
-    from swingar_pyg.eval.error_vs_time import MethodResult, equal_error_speedup
+    from swingar_pyg.eval.error_vs_time import MethodResult, equal_error_speedup, simulator_front
 
     def point(name, error_mm, ms):
         return MethodResult(name, 'simulator', {'a': torch.full((2, 3), error_mm)}, [ms / 1e3])
@@ -133,6 +133,9 @@ def test_equal_error_speedup_interpolates_the_simulator_curve():
     dominated = curve + [point('finer but drifting', 12.0, 5000.0)]
     again = equal_error_speedup(point('estimator', float(np.sqrt(160.0)), 5.0), dominated)
     assert again['simulator_ms_at_equal_error'] == pytest.approx(100.0, rel=1e-6)
+    front = simulator_front(dominated)
+    assert front == [(pytest.approx(4.0), pytest.approx(1000.0)),
+                     (pytest.approx(40.0), pytest.approx(10.0))]
 
 
 def test_report_configs_parse_and_bad_ones_are_refused(tmp_path):

@@ -232,17 +232,25 @@ def evaluate_second_simulator(sequences: list[TestSequence], substeps: int, iter
                         {"substeps": substeps, "iterations": iterations, "max_strain": strain})
 
 
-def equal_error_speedup(estimator: MethodResult, simulator: list[MethodResult]) -> dict:
-    """How much faster the estimator is than the simulator at the estimator's
-    mean error, interpolating the simulator's (log time, log error) Pareto front:
-    a setting that is both slower and less accurate than another (a finer solve
-    drifting from data made at a coarser one) is not a way to reach that error.
-    ``None`` where the error lies outside the front's range."""
-    points = []
+def simulator_front(simulator: list[MethodResult]) -> list[tuple[float, float]]:
+    """The simulator's Pareto front: ``(mean error mm, ms per frame)`` of the
+    settings no other setting beats on both, from the most accurate to the fastest.
+    A setting that is both slower and less accurate than another (a finer solve
+    drifting from data made at a coarser one) is not a way to reach its error."""
+    points: list[tuple[float, float]] = []
     for error_mm, ms in sorted((r.stats()["mean_mm"], r.ms_per_frame) for r in simulator
                                if r.stats()["mean_mm"] > 0):
         if not points or ms < points[-1][1]:
             points.append((error_mm, ms))
+    return points
+
+
+def equal_error_speedup(estimator: MethodResult, simulator: list[MethodResult]) -> dict:
+    """How much faster the estimator is than the simulator at the estimator's
+    mean error, interpolating the simulator's (log time, log error) Pareto front
+    (:func:`simulator_front`). ``None`` where the error lies outside the front's
+    range."""
+    points = simulator_front(simulator)
     error = estimator.stats()["mean_mm"]
     if len(points) < 2 or not points[0][0] <= error <= points[-1][0]:
         return {"simulator_ms_at_equal_error": None, "speedup": None,

@@ -13,7 +13,7 @@ import numpy as np
 import torch
 
 from swingar_pyg.atomic import atomic_path
-from swingar_pyg.eval.error_vs_time import setting_name
+from swingar_pyg.eval.error_vs_time import setting_name, simulator_front
 
 
 def _write_text(path: Path, text: str) -> None:
@@ -64,29 +64,40 @@ def _motion(s) -> str:
 
 
 def plot_error_vs_time(results, rigid, simulator, second, floor, simulated):
-    """Every method on the sequences the simulator re-ran, so the points compare."""
+    """Every method on the sequences the simulator re-ran, so the points compare; the
+    simulator's settings as points, joined along its Pareto front (what the equal-error
+    speed-up interpolates)."""
+    from matplotlib.ticker import ScalarFormatter
+
     figure, axis = _figure((8.5, 5))
-    curve = sorted((r.ms_per_frame, r.stats(simulated)["mean_mm"], r) for r in simulator)
-    axis.plot([c[0] for c in curve], [c[1] for c in curve], "o-", color="grey",
-              label="simulator at other substeps x iterations")
-    for ms, error, result in curve:
+    axis.scatter([r.ms_per_frame for r in simulator],
+                 [r.stats(simulated)["mean_mm"] for r in simulator], color="grey", zorder=2,
+                 label="simulator at other substeps x iterations")
+    front = simulator_front(simulator)
+    axis.plot([ms for _, ms in front], [error for error, _ in front], "-", color="grey",
+              label="the simulator's Pareto front")
+    for result in simulator:
         tag = " (ground truth's setting)" if result.extra["is_ground_truth_setting"] else ""
-        axis.annotate(result.name.split()[-1] + tag, (ms, error), fontsize=7, xytext=(4, 3),
-                      textcoords="offset points")
+        axis.annotate(result.name.split()[-1] + tag,
+                      (result.ms_per_frame, result.stats(simulated)["mean_mm"]), fontsize=7,
+                      xytext=(4, 3), textcoords="offset points")
     axis.scatter([rigid.ms_per_frame], [rigid.stats(simulated)["mean_mm"]], marker="s",
                  color="black", label="rigid skinning", zorder=3)
     if second is not None:
         axis.scatter([second.ms_per_frame], [second.stats(simulated)["mean_mm"]], marker="D",
                      color="dimgrey", label=second.name, zorder=3)
     for k, result in enumerate(results):
+        # distinct markers: an fp32 and a bf16 run often land on the same spot
         axis.scatter([result.ms_per_frame], [result.stats(simulated)["mean_mm"]], s=50, zorder=3,
-                     color=f"C{k}", label=result.name)
+                     color=f"C{k}", marker="o^vPX"[k % 5], label=result.name)
     if floor is not None:
         axis.axhline(floor["mean_mm"], color="black", lw=1, ls=":",
                      label=f"noise floor: {floor['name']}")
     axis.set(xscale="log", yscale="log", xlabel="ms per frame (this machine, one thread)",
              ylabel="mean vertex error vs ground truth (mm)",
              title=f"error against run time ({len(simulated)} re-simulated test sequences)")
+    axis.yaxis.set_major_formatter(ScalarFormatter())
+    axis.yaxis.set_minor_formatter(ScalarFormatter())
     axis.grid(alpha=0.3, which="both")
     axis.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     figure.tight_layout()
