@@ -6,10 +6,10 @@
 Scene: a procedural knee-length skirt on the default anny body doing ``--motion`` (walk by
 default) for ``--seconds``. For each garment resolution, a fine reference (``--reference``,
 400 substeps x 2 sweeps: the smallest time step the quickstart data take, where a frame is
-re-run, swept twice) and the coarser ``--settings`` run on the same scene; the error of a setting is the distance of
-its vertices from the reference's (mean over vertices and frames, and the 95th percentile,
-mm), its cost the mean wall time per frame (the re-runs of an error-controlled setting
-``SxI:M`` included). Also recorded: the mean substeps a frame, the largest edge strain, the
+re-run, swept twice) and the coarser ``--settings`` run on the same scene; the error of a
+setting is the distance of its vertices from the reference's (mean over vertices and frames,
+and the 95th percentile, mm), its cost the mean wall time per frame (the re-runs of an
+error-controlled setting ``SxI:M`` included). Also recorded: the mean substeps a frame, the largest edge strain, the
 share of frames above the 6 % stretch bar and of vertices inside the body. This is the curve
 the estimator is later placed on (``swingar report`` draws the same curve on the test data).
 
