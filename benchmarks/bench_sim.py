@@ -9,9 +9,10 @@ default) for ``--seconds``. For each garment resolution, a fine reference (``--r
 re-run, swept twice) and the coarser ``--settings`` run on the same scene; the error of a
 setting is the distance of its vertices from the reference's (mean over vertices and frames,
 and the 95th percentile, mm), its cost the mean wall time per frame (the re-runs of an
-error-controlled setting ``SxI:M`` included). Also recorded: the mean substeps a frame, the largest edge strain, the
-share of frames above the 6 % stretch bar and of vertices inside the body. This is the curve
-the estimator is later placed on (``swingar report`` draws the same curve on the test data).
+error-controlled setting ``SxI:M`` included). Also recorded: the mean substeps a frame, the
+largest edge strain, the share of frames above the 6 % stretch bar and of vertices inside the
+body. This is the curve the estimator is later placed on (``swingar report`` draws the same
+curve on the test data).
 
 The reference itself is run a second time on the same scene with the rest garment moved by
 ``PERTURBATION`` (1 micrometre, random per vertex): how far that run drifts from the first is
