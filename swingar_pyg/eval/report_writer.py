@@ -169,7 +169,7 @@ def write_report(out: Path, config, *, machine, test_path, sequences, results, p
                  rigid, simulator, second, simulated, speedups, streaming, extra, stability,
                  checkpoints, body_sdf, seconds) -> Path:
     out.mkdir(parents=True, exist_ok=True)
-    from swingar_pyg.eval.stability import as_dicts, stability_table
+    from swingar_pyg.eval.stability import as_dicts, stability_summary, stability_table
 
     finest = max(simulator, key=lambda r: r.extra["substeps"] * r.extra["iterations"])
     floor = None
@@ -308,13 +308,8 @@ def write_report(out: Path, config, *, machine, test_path, sequences, results, p
                          f"{row['p95_mm']:.1f} | {row['ms_per_frame']:.1f} |")
         lines.append("")
     if stability:
-        bad = [row for row in stability if not row.ok]
-        lines += ["## Stability suite", "",
-                  f"{len(stability)} cases, {sum(r.outcome == 'finite' for r in stability)} "
-                  f"finite, {sum(r.outcome == 'raises' for r in stability)} raising a clear "
-                  f"ValueError, {len(bad)} failing"
-                  + (": " + ", ".join(f"{r.component} / {r.case}" for r in bad) if bad else "")
-                  + ".", "", stability_table(stability), ""]
+        lines += ["## Stability suite", "", stability_summary(stability) + ".", "",
+                  stability_table(stability), ""]
     seeds = (" --seeds " + " ".join(map(str, config.seeds_override))
              if config.seeds_override else "")
     lines += ["## Reproduce", "", "```bash", "OMP_NUM_THREADS=1 .venv/bin/swingar report -c "

@@ -3,9 +3,14 @@
 Each case runs one stage (FCAConv, the spectral descriptor, the cloth simulator,
 the estimator, collision handling) on one hard input and either gives finite
 output, measured against an independent reference where there is one, or must
-raise a clear :class:`ValueError`. A row whose output is not finite, or that
-fails otherwise, is a bug (``outcome`` says which); :func:`run_stability` never
-hides one.
+raise a clear :class:`ValueError`. Finite is not enough where a case has a
+``bound``: its measure must stay within it (float32 against float64 within a few
+roundoffs, the simulator's strain below 100 %, where an edge twice its rest
+length is torn cloth rather than stretched cloth). A row whose output is not
+finite, beyond its bound, or that fails otherwise, is a bug (``outcome`` says
+which); :func:`run_stability` never hides one. A case whose input is known to
+take a stage beyond its bound names the reason in ``limitation``; such a row is
+``degraded``, reported as such, and not a bug.
 
 Sizes: :data:`SMALL` runs in well under a minute (the tests), :data:`FULL` at the
 sizes of real use (the report): 10k-vertex graphs, a 1.5k-vertex skirt simulated
@@ -46,28 +51,40 @@ FULL = StabilitySizes(graph_side=100, descriptor_side=70, skirt_vertices=1500, s
 
 @dataclass
 class StabilityRow:
-    """One case: ``outcome`` is ``finite`` or ``raises`` when all is well;
-    ``non-finite``, ``failed`` or ``did not raise`` mark a bug."""
+    """One case: ``outcome`` is ``finite`` (within the case's bound) or
+    ``raises`` when all is well, ``degraded`` when beyond a bound the case
+    documents as a limitation; ``beyond bound``, ``non-finite``, ``failed`` or
+    ``did not raise`` mark a bug."""
 
     component: str
     case: str
     outcome: str
     measure: str
     value: float | None
+    bound: float | None = None
     note: str = ""
     seconds: float = 0.0
 
     @property
     def ok(self) -> bool:
-        return self.outcome in ("finite", "raises")
+        return self.outcome in ("finite", "raises", "degraded")
 
 
 @dataclass(frozen=True)
 class Case:
+    """One hard input for one stage.
+
+    ``run`` returns the measure's value, the outputs checked for finiteness and
+    optionally a note; ``bound`` is the largest acceptable value (``None``: any
+    finite value); ``limitation`` says why this input may go beyond it;
+    ``raises`` is the text the expected :class:`ValueError` contains."""
+
     component: str
     name: str
     measure: str
     run: Callable[["_Context"], tuple[float, list]]
+    bound: float | None = None
+    limitation: str = ""
     raises: str | None = None
     needs: str | None = None  # an optional package the case runs only with
 
@@ -389,6 +406,11 @@ def _estimator_large(context):
 
 # ------------------------------------------------------------------- collision handling
 
+SURFACE_TOLERANCE = 1e-6
+"""A corrected vertex counts as inside the body when deeper than this (1 µm): one
+moved onto the surface lands on either side of it by rounding alone."""
+
+
 def _collide(context, vertices: Tensor, posed_index: int, posed) -> tuple:
     from swingar_pyg.collision import exact_signed_distance, resolve_collisions
 
@@ -402,8 +424,10 @@ def _collide(context, vertices: Tensor, posed_index: int, posed) -> tuple:
         result = resolve_collisions(vertices.double(), context.graph.edge_index, exact)
         sdf = "exact SDF"
     before = float((exact(vertices.double())[0] > 0).float().mean())
-    after = float((exact(result.vertices.double())[0] > 0).float().mean())
-    return 100 * after, [result.vertices], f"{sdf}; inside before {100 * before:.1f} %"
+    depth = exact(result.vertices.double())[0]
+    after = float((depth > SURFACE_TOLERANCE).float().mean())
+    return 100 * after, [result.vertices], (f"{sdf}; inside before {100 * before:.1f} %, "
+                                            f"deepest after {1e3 * float(depth.max()):.3g} mm")
 
 
 def _collision_inside(context):
@@ -439,7 +463,8 @@ def _collision_scale(context):
 
     rest = context.graph.rest.double() * 1e3
     result = resolve_collisions(rest - rest.mean(0), context.graph.edge_index, ball)
-    return 100 * float((ball(result.vertices)[0] > 0).float().mean()), [result.vertices]
+    inside = ball(result.vertices)[0] > 1e3 * SURFACE_TOLERANCE
+    return 100 * float(inside.float().mean()), [result.vertices]
 
 
 # ------------------------------------------------------------------- clear errors
@@ -496,60 +521,91 @@ def _raise_estimator_window(context):
     context.estimator(window)
 
 
+FLOAT32 = 1e-5  # float32 against float64: a few hundred roundoffs of 2^-24
+BFLOAT16 = 8 * 2.0**-8  # eight roundoffs of bfloat16's 8-bit significand
+FLOAT16 = 8 * 2.0**-11
+EXACT = 1e-9  # float64 against float64
+NYSTROM = 0.05  # Nyström's top eigenvalues against the exact spectrum
+TORN = 1.0  # an edge at twice its rest length is torn cloth, not stretched cloth
+BF16_MM = 5 * 2.0**-8 * 1e3  # five bfloat16 roundoffs of a coordinate 1 m from the origin
+INSIDE_PERCENT = 0.5
+# The motion's phase is float32: 10,000 frames in, 2*pi*333 s = 2,092 rad carries a
+# roundoff of 2.4e-4 rad, which moves a 12-degree sway of a 1 m body by up to ~0.05 mm.
+# Drift beyond twice that is the estimator's recurrent state, not the clock.
+DRIFT_MM = 0.1
+
+_OVER_CONSTRAINED = ("a waist-pinned skirt around legs split wide is over-constrained; with "
+                     "the default dihedral bending it stays under the bound")
+_VBD_STEP = ("newton's VBD does not converge in a 33 ms step (VBDSettings' default is 10 "
+             "substeps a frame)")
+
 CASES: tuple[Case, ...] = (
-    Case("FCAConv", "input x 1e-3", "max relative error vs float64", _fca_scale(1e-3)),
-    Case("FCAConv", "input x 1e3", "max relative error vs float64", _fca_scale(1e3)),
-    Case("FCAConv", "bfloat16", "max relative error vs float64", _fca_precision(torch.bfloat16)),
-    Case("FCAConv", "float16", "max relative error vs float64", _fca_precision(torch.float16)),
-    Case("FCAConv", "isolated vertices", "max |output - own message|", _fca_isolated),
+    Case("FCAConv", "input x 1e-3", "max relative error vs float64", _fca_scale(1e-3),
+         bound=FLOAT32),
+    Case("FCAConv", "input x 1e3", "max relative error vs float64", _fca_scale(1e3),
+         bound=FLOAT32),
+    Case("FCAConv", "bfloat16", "max relative error vs float64", _fca_precision(torch.bfloat16),
+         bound=BFLOAT16),
+    Case("FCAConv", "float16", "max relative error vs float64", _fca_precision(torch.float16),
+         bound=FLOAT16),
+    Case("FCAConv", "isolated vertices", "max |output - own message|", _fca_isolated,
+         bound=FLOAT32),
     Case("FCAConv", "disconnected pieces (1 : 1e3 scale)", "max relative gap Batch vs alone",
-         _fca_pieces),
-    Case("FCAConv", "zero-area faces, zero features", "max |output|", _fca_degenerate),
+         _fca_pieces, bound=FLOAT32),
+    Case("FCAConv", "zero-area faces, zero features", "max |output|", _fca_degenerate,
+         bound=FLOAT32),
     Case("descriptor", "scale 1e-3 (sigma scaled)", "top-16 error vs unit scale",
-         _descriptor_scale(1e-3)),
+         _descriptor_scale(1e-3), bound=EXACT),
     Case("descriptor", "scale 1e3 (sigma scaled)", "top-16 error vs unit scale",
-         _descriptor_scale(1e3)),
+         _descriptor_scale(1e3), bound=EXACT),
     Case("descriptor", "N < z (30 vertices, z = 256)", "error vs exact spectrum",
-         _descriptor_small),
-    Case("descriptor", "disconnected pieces", "top-16 error vs exact spectra", _descriptor_pieces),
+         _descriptor_small, bound=EXACT),
+    Case("descriptor", "disconnected pieces", "top-16 error vs exact spectra", _descriptor_pieces,
+         bound=NYSTROM),
     Case("descriptor", "duplicate + isolated vertex, zero-area faces", "top-16 error vs exact",
-         _descriptor_degenerate),
+         _descriptor_degenerate, bound=NYSTROM),
     Case("simulator", "compliance 0 (stretch, distance bending)", "max edge strain",
-         _simulator(bending="distance", bend_compliance=0.0)),
-    Case("simulator", "bending 1e4x stiffer", "max edge strain", _simulator(bend_stiffness=10.0)),
-    Case("simulator", "100x heavier cloth", "max edge strain", _simulator(density=15.0)),
-    Case("simulator", "4x time step", "max edge strain", _simulator_coarse),
-    Case("simulator", "legs split", "max edge strain", _simulator("leg_split")),
-    Case("simulator", "arms crossed", "max edge strain", _simulator("arm_cross")),
+         _simulator(bending="distance", bend_compliance=0.0), bound=TORN),
+    Case("simulator", "bending 1e4x stiffer", "max edge strain", _simulator(bend_stiffness=10.0),
+         bound=TORN),
+    Case("simulator", "100x heavier cloth", "max edge strain", _simulator(density=15.0),
+         bound=TORN),
+    Case("simulator", "4x time step", "max edge strain", _simulator_coarse, bound=TORN),
+    Case("simulator", "legs split", "max edge strain", _simulator("leg_split"), bound=TORN),
+    Case("simulator", "arms crossed", "max edge strain", _simulator("arm_cross"), bound=TORN),
     Case("simulator", "fast spin (3 turns/s)", "max edge strain",
-         _simulator("spin_stop", speed=3.0)),
+         _simulator("spin_stop", speed=3.0), bound=TORN),
     Case("simulator", "distance bending 100x stiffer", "max edge strain",
-         _simulator(bending="distance", bend_compliance=1e-6)),
+         _simulator(bending="distance", bend_compliance=1e-6), bound=TORN),
     Case("simulator", "distance bending, legs split", "max edge strain",
-         _simulator("leg_split", bending="distance")),
+         _simulator("leg_split", bending="distance"), bound=TORN, limitation=_OVER_CONSTRAINED),
     Case("VBD simulator", "membrane 100x stiffer", "max edge strain",
-         _vbd(stretch_stiffness=1e6), needs="newton"),
+         _vbd(stretch_stiffness=1e6), bound=TORN, needs="newton"),
     Case("VBD simulator", "bending 1e4x stiffer", "max edge strain", _vbd(bend_stiffness=10.0),
-         needs="newton"),
+         bound=TORN, needs="newton"),
     Case("VBD simulator", "100x heavier cloth", "max edge strain", _vbd(density=15.0),
-         needs="newton"),
+         bound=TORN, needs="newton"),
     Case("VBD simulator", "one substep per frame (33 ms)", "max edge strain", _vbd(substeps=1),
+         bound=TORN, limitation=_VBD_STEP, needs="newton"),
+    Case("VBD simulator", "legs split", "max edge strain", _vbd("leg_split"), bound=TORN,
          needs="newton"),
-    Case("VBD simulator", "legs split", "max edge strain", _vbd("leg_split"), needs="newton"),
     Case("VBD simulator", "fast spin (3 turns/s)", "max edge strain", _vbd("spin_stop", speed=3.0),
-         needs="newton"),
-    Case("estimator", "long stream (drift)", "max mm between equal phases", _estimator_drift),
-    Case("estimator", "bfloat16 autocast", "max mm vs float32", _estimator_bf16),
+         bound=TORN, needs="newton"),
+    Case("estimator", "long stream (drift)", "max mm between equal phases", _estimator_drift,
+         bound=DRIFT_MM),
+    Case("estimator", "bfloat16 autocast", "max mm vs float32", _estimator_bf16, bound=BF16_MM),
     Case("estimator", "legs split", "mean mm from rigid skinning", _estimator_extreme("leg_split")),
     Case("estimator", "arms crossed", "mean mm from rigid skinning",
          _estimator_extreme("arm_cross")),
     Case("estimator", "20x the vertices", "ms per streamed frame", _estimator_large),
-    Case("collisions", "garment entirely inside", "% inside after", _collision_inside),
-    Case("collisions", "legs split through a hip-carried skirt", "% inside after",
-         _collision_extreme("leg_split", 0.5)),
-    Case("collisions", "front split through a hip-carried skirt", "% inside after",
-         _collision_extreme("leg_split", 1.5)),
-    Case("collisions", "coordinates x 1e3", "% inside after", _collision_scale),
+    Case("collisions", "garment entirely inside", "% over 1 µm inside after", _collision_inside,
+         bound=INSIDE_PERCENT),
+    Case("collisions", "legs split through a hip-carried skirt", "% over 1 µm inside after",
+         _collision_extreme("leg_split", 0.5), bound=INSIDE_PERCENT),
+    Case("collisions", "front split through a hip-carried skirt", "% over 1 µm inside after",
+         _collision_extreme("leg_split", 1.5), bound=INSIDE_PERCENT),
+    Case("collisions", "coordinates x 1e3", "% over 1 mm inside after (x 1e3)", _collision_scale,
+         bound=INSIDE_PERCENT),
     Case("mesh", "NaN vertex", "", _raise_mesh_nan, raises="not finite"),
     Case("simulator", "negative compliance", "", _raise_simulator_settings,
          raises="must be finite and >= 0"),
@@ -575,7 +631,7 @@ def _finite(value) -> bool:
 
 def run_case(case: Case, context: _Context) -> StabilityRow:
     start = time.perf_counter()
-    row = StabilityRow(case.component, case.name, "", case.measure, None)
+    row = StabilityRow(case.component, case.name, "", case.measure, None, case.bound)
     try:
         with torch.no_grad():
             out = case.run(context)
@@ -597,7 +653,14 @@ def run_case(case: Case, context: _Context) -> StabilityRow:
     value, outputs, *note = out
     row.value = float(value)
     row.note = note[0] if note else ""
-    row.outcome = "finite" if _finite(outputs) and math.isfinite(row.value) else "non-finite"
+    if not (_finite(outputs) and math.isfinite(row.value)):
+        row.outcome = "non-finite"
+    elif case.bound is None or row.value <= case.bound:
+        row.outcome = "finite"
+    else:
+        row.outcome = "degraded" if case.limitation else "beyond bound"
+        row.note = "; ".join(filter(None, [row.note, f"beyond {case.bound:.3g}: "
+                                                     f"{case.limitation or 'a bug'}"]))
     return row
 
 
@@ -622,13 +685,28 @@ def run_stability(sizes: StabilitySizes = FULL, estimator=None, body_sdf: str | 
     return [run_case(case, context) for case in cases]
 
 
+def stability_summary(rows: list[StabilityRow]) -> str:
+    """How many rows had each outcome, naming the degraded and the failing ones."""
+    def named(some: list[StabilityRow]) -> str:
+        return ": " + ", ".join(f"{r.component} / {r.case}" for r in some) if some else ""
+
+    degraded = [row for row in rows if row.outcome == "degraded"]
+    bad = [row for row in rows if not row.ok]
+    return (f"{len(rows)} cases, {sum(r.outcome == 'finite' for r in rows)} finite within their "
+            f"bounds, {sum(r.outcome == 'raises' for r in rows)} raising a clear ValueError, "
+            f"{len(degraded)} degraded by a documented limitation{named(degraded)}; "
+            f"{len(bad)} failing{named(bad)}")
+
+
 def stability_table(rows: list[StabilityRow]) -> str:
     """The rows as a Markdown table."""
-    lines = ["| component | case | outcome | measure | value | note |", "|---|---|---|---|---|---|"]
+    lines = ["| component | case | outcome | measure | value | bound | note |",
+             "|---|---|---|---|---|---|---|"]
     for row in rows:
         value = "" if row.value is None else f"{row.value:.3g}"
+        bound = "" if row.bound is None else f"{row.bound:.3g}"
         lines.append(f"| {row.component} | {row.case} | {row.outcome} | {row.measure} | "
-                     f"{value} | {row.note} |")
+                     f"{value} | {bound} | {row.note} |")
     return "\n".join(lines)
 
 
