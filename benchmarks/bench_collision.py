@@ -69,7 +69,7 @@ def garment_frames(data: Path, checkpoint: str | None, every: int, sequences: in
     import h5py
 
     from swingar_pyg.geometry import mesh_edge_index
-    from swingar_pyg.prediction import animate, garment_graph, load_estimator
+    from swingar_pyg.inference.prediction import animate, garment_graph, load_estimator
 
     with h5py.File(data, "r") as file:
         ids = sorted(file["sequences"])[:sequences]

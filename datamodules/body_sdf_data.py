@@ -1,6 +1,6 @@
 """Training points of the neural body SDF: points near posed bodies with their
 exact signed distance and outward normal
-(:func:`~swingar_pyg.collision.body_signed_distance`, positive inside).
+(:func:`~swingar_pyg.geometry.body_signed_distance`, positive inside).
 
 A split is a set of frames, each one body (shape, pose) with a fixed number of
 points: samples on the posed surface moved along its normal by a random offset
@@ -112,7 +112,7 @@ def _frames(body, shape, rotations, translation, chosen, count, settings, rng, e
     """Samples and exact targets of ``chosen`` frames of a pose sequence."""
     import torch
 
-    from swingar_pyg.collision import body_signed_distance
+    from swingar_pyg.geometry import body_signed_distance
 
     posed = body.pose(torch.as_tensor(shape, dtype=torch.float32), rotations[chosen],
                       translation[chosen])

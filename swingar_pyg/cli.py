@@ -12,7 +12,7 @@ LIGHTNING_COMMANDS = ("fit", "validate", "test", "predict")
 
 
 def _demo(args: argparse.Namespace) -> int:
-    from swingar_pyg.demo import run_demo
+    from swingar_pyg.inference.demo import run_demo
 
     run_demo(args.garment or None, z=args.z, sigma=args.sigma, alpha=args.alpha,
              device=args.device)
@@ -280,12 +280,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _predict(args: argparse.Namespace) -> int:
-    from swingar_pyg.prediction import predict_to_folder
+    from swingar_pyg.inference.prediction import predict_to_folder
 
     summary = predict_to_folder(args.ckpt, args.garment, args.motion, args.out,
                                 args.body_shape, args.seconds, args.preview,
                                 collisions=args.collisions, body_sdf=args.body_sdf)
-    from swingar_pyg.scene import StageCost, stage_table
+    from swingar_pyg.inference.scene import StageCost, stage_table
 
     print(stage_table([StageCost(**stage) for stage in summary["stages"]]))
     print(f"{summary['garment']} ({summary['vertices']} vertices) on {summary['motion']}: "

@@ -276,7 +276,7 @@ def test_cli_trains_the_body_sdf_from_its_config(tiny_windows, tiny_body_sdf, tm
 
     from datamodules import BodySDFDataModule
     from datamodules.body_sdf_data import read_split
-    from swingar_pyg.collision import body_signed_distance
+    from swingar_pyg.geometry import body_signed_distance
     from swingar_pyg.training import BodySDFModule
     from swingar_pyg.world.body import AnnyBody
 

@@ -3,12 +3,14 @@ import pytest
 import torch
 from torch_geometric.data import Batch, Data
 
-from swingar_pyg.collision import (
+from swingar_pyg.collision import fixed_offset_push, resolve_collisions
+from swingar_pyg.geometry import (
     body_signed_distance,
-    fixed_offset_push,
-    resolve_collisions,
+    inside_share,
+    mesh_edge_index,
+    roll_into_cylinder,
+    sheet,
 )
-from swingar_pyg.geometry import mesh_edge_index, roll_into_cylinder, sheet
 
 RADIUS = 0.3
 
@@ -42,7 +44,6 @@ def test_exact_reference_sign_and_normal_on_a_sphere_mesh():
 
 def test_inside_share_counts_points_inside_a_moving_sphere_mesh():
     trimesh = pytest.importorskip('trimesh')
-    from swingar_pyg.collision.reference import inside_share
 
     ball = trimesh.creation.icosphere(subdivisions=4, radius=RADIUS)
     generator = np.random.default_rng(0)

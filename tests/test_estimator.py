@@ -5,6 +5,7 @@ import pytest
 import torch
 from torch_geometric.data import Batch
 
+from swingar_pyg.inference import SwinGarStream
 from swingar_pyg.models import SwinGarEstimator, pose_window
 from swingar_pyg.models.pose_features import heading_rotation
 from tests.windows import SMALL_ESTIMATOR
@@ -99,7 +100,7 @@ def test_stream_equals_the_windowed_estimator(tiny_windows, detail):
     sequence = dataset.sequences[0]
     model = trained_like(detail=detail)
     window = dataset[0]
-    stream = model.stream(window, sequence.body_shape, sequence.fps)
+    stream = SwinGarStream(model, window, sequence.body_shape, sequence.fps)
     with torch.no_grad():
         for t in range(len(sequence.target)):
             streamed = stream.step(sequence.rotations[t], sequence.translation[t],

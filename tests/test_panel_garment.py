@@ -59,7 +59,7 @@ def anny():
     (TShirtSpec(vertices=600), 4, 'Neck'), (TShirtSpec(vertices=3000, jitter=0.3), 4, 'Neck'),
     (JumpsuitSpec(vertices=800, leg=0.5), 3, 'Spine1'), (JumpsuitSpec(vertices=4000), 3, 'Spine1')])
 def test_sewn_garments_are_one_surface_outside_the_body_pinned_at_the_top(anny, spec, holes, top):
-    from swingar_pyg.collision.reference import BodySurface
+    from swingar_pyg.geometry.signed_distance import BodySurface
 
     body, shape = anny
     garment = fit_garment(garment_spec({'kind': type(spec).__name__[:-4].lower(),

@@ -27,7 +27,7 @@ def checkpoint(tiny_windows, tmp_path_factory):
 
 def test_predict_animates_a_garment_of_unseen_topology_from_an_obj(checkpoint, tmp_path):
     from swingar_pyg.cli import main
-    from swingar_pyg.prediction import write_obj
+    from swingar_pyg.inference.prediction import write_obj
     from swingar_pyg.world.body import AnnyBody
     from swingar_pyg.world.garment import SkirtSpec, fit_procedural_skirt
 

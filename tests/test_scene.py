@@ -4,7 +4,7 @@ import pytest
 import torch
 
 from swingar_pyg.models import SwinGarEstimator
-from swingar_pyg.scene import GarmentFeatureCache, Scene, compile_scene
+from swingar_pyg.inference.scene import GarmentFeatureCache, Scene, compile_scene
 from tests.windows import SMALL_ESTIMATOR
 
 pytest.importorskip('anny')
@@ -75,7 +75,7 @@ def test_a_garment_far_from_the_body_skips_the_collision_pass(world, monkeypatch
 
 
 def test_a_static_pose_window_reuses_the_last_output(world):
-    from swingar_pyg.prediction import animate
+    from swingar_pyg.inference.prediction import animate
     from swingar_pyg.world.motion import Motion
 
     body, shape, skirts, estimator = world
@@ -91,7 +91,7 @@ def test_a_static_pose_window_reuses_the_last_output(world):
     assert reused.ran and reused.calls == hold - (estimator.history + 2)
     assert result.stage('detail (M_d)').calls == motion.num_frames - reused.calls
     # every frame streamed: the same garment
-    from swingar_pyg.prediction import garment_graph
+    from swingar_pyg.inference.prediction import garment_graph
 
     posed = body.pose(shape, motion.rotations, motion.translation)
     graph = garment_graph(skirts[0], len(body.joint_names), estimator.descriptor_size)

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import torch
 
-from swingar_pyg.geometry import signed_distance_to_surface, split_quads, vertex_normals
+from swingar_pyg.geometry import closest_face_signed_distance, split_quads, vertex_normals
 from swingar_pyg.geometry.skinning import linear_blend_skinning
 from swingar_pyg.geometry.mesh import as_mesh
 from swingar_pyg.world.garment import (DressSpec, SkirtSpec, body_envelope, fit_procedural_skirt,
@@ -166,16 +166,16 @@ def test_a_slit_opens_one_column_of_cells_at_the_back_up_from_the_hem():
     assert set(map(tuple, slit.mesh.faces)) < set(map(tuple, closed.mesh.faces))
 
 
-def test_signed_distance_to_surface_matches_a_sphere():
+def test_closest_face_signed_distance_matches_a_sphere():
     import trimesh
 
     sphere = trimesh.creation.icosphere(subdivisions=4, radius=0.2)
     points = np.random.default_rng(0).normal(size=(200, 3))
     points *= np.random.default_rng(1).uniform(0.02, 0.4, size=(200, 1)) / np.linalg.norm(
         points, axis=1, keepdims=True)
-    distance = signed_distance_to_surface(points, sphere.vertices, sphere.faces)
-    # The faceted sphere lies within 0.5 mm inside the analytic one.
-    assert np.allclose(distance, np.linalg.norm(points, axis=1) - 0.2, atol=6e-4)
+    distance = closest_face_signed_distance(points, sphere.vertices, sphere.faces)
+    # Positive inside; the faceted sphere lies within 0.5 mm inside the analytic one.
+    assert np.allclose(distance, 0.2 - np.linalg.norm(points, axis=1), atol=6e-4)
 
 
 @pytest.mark.parametrize('kwargs, message', [({'length': 3.0}, 'length'),

@@ -1,6 +1,7 @@
-"""Garment–body collisions: the exact signed distance (the reference), the
-broad phase on the body's bones, the neighbour-aware correction, and the
-correction driven by the neural body SDF."""
+"""Garment–body collisions after inference: the broad phase on the body's bones,
+the neighbour-aware correction (driven by the exact signed distance of
+:mod:`swingar_pyg.geometry.signed_distance` or by the neural body SDF), and
+TailorNet's fixed-offset push."""
 
 from swingar_pyg.collision.broad_phase import BoneCapsules
 from swingar_pyg.collision.correction import (
@@ -11,8 +12,6 @@ from swingar_pyg.collision.correction import (
     resolve_collisions,
 )
 from swingar_pyg.collision.neural import NeuralCollisions
-from swingar_pyg.collision.reference import body_signed_distance
 
-__all__ = ["BoneCapsules", "Correction", "NeuralCollisions", "body_signed_distance",
-           "exact_signed_distance", "fixed_offset_push", "nearest_vertex_signed_distance",
-           "resolve_collisions"]
+__all__ = ["BoneCapsules", "Correction", "NeuralCollisions", "exact_signed_distance",
+           "fixed_offset_push", "nearest_vertex_signed_distance", "resolve_collisions"]

@@ -124,7 +124,7 @@ def fixed_offset_push(vertices: Tensor, signed_distance: SignedDistance,
 def exact_signed_distance(body_vertices: Tensor, body_faces: Tensor) -> SignedDistance:
     """:math:`S` and :math:`\\nabla S` of a posed body mesh, exactly (slow: the
     reference for metrics and for checking the network)."""
-    from swingar_pyg.collision.reference import BodySurface
+    from swingar_pyg.geometry.signed_distance import BodySurface
 
     surface = BodySurface(body_vertices.detach().cpu().numpy(), body_faces.cpu().numpy())
 

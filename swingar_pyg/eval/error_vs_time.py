@@ -20,6 +20,8 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from swingar_pyg.inference import SwinGarStream
+
 
 @dataclass
 class TestSequence:
@@ -127,9 +129,9 @@ def evaluate_estimator(name: str, estimator, sequences: list[TestSequence],
             vertices inside the body after it (exact SDF) is recorded.
     """
     from swingar_pyg.collision import exact_signed_distance, resolve_collisions
-    from swingar_pyg.collision.reference import BodySurface
+    from swingar_pyg.geometry.signed_distance import BodySurface
     from swingar_pyg.geometry import mesh_edge_index
-    from swingar_pyg.prediction import garment_graph
+    from swingar_pyg.inference.prediction import garment_graph
 
     if precision not in ("fp32", "bf16"):
         raise ValueError(f"precision must be fp32 or bf16, got {precision!r}")
@@ -141,7 +143,7 @@ def evaluate_estimator(name: str, estimator, sequences: list[TestSequence],
                               sigma=sigma, seed=seed).to(device)
         edges = mesh_edge_index(s.garment.mesh)
         handler = collisions(s.body_shape) if callable(collisions) else None
-        stream = estimator.stream(graph, s.body_shape.to(device), s.motion.fps)
+        stream = SwinGarStream(estimator, graph, s.body_shape.to(device), s.motion.fps)
         frames = []
         for t in range(len(s.truth)):
             start = time.perf_counter()

@@ -23,6 +23,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from swingar_pyg.inference import SwinGarStream
+
 @dataclass(frozen=True)
 class ModelSpec:
     """A trained estimator: its training configs (layered), seeds, and the
@@ -203,7 +205,7 @@ def _test_split(dataset: str) -> Path:
 
 
 def _streaming_fps(estimator, body, vertices: tuple[int, ...], frames: int) -> list[dict]:
-    from swingar_pyg.prediction import garment_graph
+    from swingar_pyg.inference.prediction import garment_graph
     from swingar_pyg.world.garment import SkirtSpec, fit_procedural_skirt
     from swingar_pyg.world.motion_library import make_motion
 
@@ -214,7 +216,7 @@ def _streaming_fps(estimator, body, vertices: tuple[int, ...], frames: int) -> l
     for count in vertices:
         skirt = fit_procedural_skirt(SkirtSpec(length=0.8, vertices=count), body, shape)
         graph = garment_graph(skirt, len(body.joint_names), estimator.descriptor_size)
-        stream = estimator.stream(graph, shape, motion.fps)
+        stream = SwinGarStream(estimator, graph, shape, motion.fps)
         seconds = []
         for t in range(motion.num_frames):
             start = time.perf_counter()
@@ -238,7 +240,7 @@ def run_report(config: ReportConfig, progress: bool = True, log=print) -> Path:
         evaluate_simulator,
         load_test_sequences,
     )
-    from swingar_pyg.prediction import load_estimator
+    from swingar_pyg.inference.prediction import load_estimator
     from swingar_pyg.world.body import AnnyBody
 
     out = Path(config.output)

@@ -30,6 +30,8 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from swingar_pyg.inference import SwinGarStream
+
 
 @dataclass(frozen=True)
 class StabilitySizes:
@@ -135,7 +137,7 @@ class _Context:
 
     @cached_property
     def graph(self):
-        from swingar_pyg.prediction import garment_graph
+        from swingar_pyg.inference.prediction import garment_graph
 
         return garment_graph(self.skirt, len(self.body.joint_names),
                              self.estimator.descriptor_size)
@@ -341,7 +343,7 @@ def _vbd(motion: str = "sway", speed: float = 1.0, substeps: int | None = None, 
 # ------------------------------------------------------------------------- estimator
 
 def _stream(context, rotations, translation, autocast: torch.dtype | None = None) -> Tensor:
-    from swingar_pyg.prediction import animate
+    from swingar_pyg.inference.prediction import animate
 
     posed = context.body.pose(context.shape, rotations, translation)
     with torch.autocast("cpu", dtype=autocast, enabled=autocast is not None):
@@ -387,7 +389,7 @@ def _estimator_extreme(kind: str):
 
 
 def _estimator_large(context):
-    from swingar_pyg.prediction import garment_graph
+    from swingar_pyg.inference.prediction import garment_graph
     from swingar_pyg.world.garment import SkirtSpec, fit_procedural_skirt
 
     vertices = 20 * context.sizes.skirt_vertices
@@ -396,7 +398,7 @@ def _estimator_large(context):
     graph = garment_graph(skirt, len(context.body.joint_names), context.estimator.descriptor_size)
     clip = context.motion("walk", 0.3)
     posed = context.body.pose(context.shape, clip.rotations, clip.translation)
-    stream = context.estimator.stream(graph, context.shape, 30.0)
+    stream = SwinGarStream(context.estimator, graph, context.shape, 30.0)
     start = time.perf_counter()
     out = [stream.step(clip.rotations[t], clip.translation[t], posed.joint_transforms[t],
                        posed.joint_positions[t]) for t in range(len(clip.rotations))]

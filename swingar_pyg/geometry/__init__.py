@@ -1,6 +1,5 @@
 """Mesh geometry on numpy/scipy (preprocessing) and torch (batched, differentiable)."""
 
-from swingar_pyg.geometry.distance import signed_distance_to_surface
 from swingar_pyg.geometry.geodesic import (
     edge_length_graph,
     farthest_point_sampling,
@@ -16,6 +15,12 @@ from swingar_pyg.geometry.mesh import (
 )
 from swingar_pyg.geometry.normals import vertex_normals
 from swingar_pyg.geometry.primitives import roll_into_cylinder, sheet, split_quads
+from swingar_pyg.geometry.signed_distance import (
+    BodySurface,
+    body_signed_distance,
+    closest_face_signed_distance,
+    inside_share,
+)
 from swingar_pyg.geometry.spectral import (
     SpectralDescriptor,
     exact_affinity_spectrum,
@@ -24,21 +29,24 @@ from swingar_pyg.geometry.spectral import (
 )
 
 __all__ = [
+    "BodySurface",
     "Mesh",
     "SpectralDescriptor",
     "as_mesh",
+    "body_signed_distance",
     "boundary_edges",
+    "closest_face_signed_distance",
     "edge_length_graph",
     "exact_affinity_spectrum",
     "farthest_point_sampling",
     "gaussian_affinity",
     "geodesic_distances",
+    "inside_share",
     "load_mesh",
     "mesh_edge_index",
     "mesh_edges",
     "roll_into_cylinder",
     "sheet",
-    "signed_distance_to_surface",
     "split_quads",
     "spectral_descriptor",
     "vertex_normals",

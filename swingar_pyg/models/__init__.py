@@ -4,7 +4,6 @@ from swingar_pyg.models.body_sdf import BodySDF
 from swingar_pyg.models.estimator import EstimatorOutput, SwinGarEstimator
 from swingar_pyg.models.garment_window import GarmentWindow
 from swingar_pyg.models.pose_features import pose_feature_size, pose_window
-from swingar_pyg.models.streaming import SwinGarStream
 
-__all__ = ["BodySDF", "EstimatorOutput", "GarmentWindow", "SwinGarEstimator", "SwinGarStream",
-           "pose_feature_size", "pose_window"]
+__all__ = ["BodySDF", "EstimatorOutput", "GarmentWindow", "SwinGarEstimator", "pose_feature_size",
+           "pose_window"]

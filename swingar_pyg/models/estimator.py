@@ -34,8 +34,6 @@ turns with the body.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
-
 import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
@@ -43,9 +41,6 @@ from torch_geometric.utils import add_remaining_self_loops
 
 from swingar_pyg.models.pose_features import pose_feature_size
 from swingar_pyg.nn import FCALSTM, FCAConv, attention_edge_index
-
-if TYPE_CHECKING:
-    from swingar_pyg.models.streaming import SwinGarStream
 
 TARGET_FRAMES = 3
 _PRIOR_FLOOR = 1e-6
@@ -221,13 +216,6 @@ class SwinGarEstimator(nn.Module):
         hidden, _ = self.detail(torch.cat([local, distances], dim=-1), edge_index)
         correction = self.correction(hidden * body_codes[batch].transpose(0, 1))
         return skinned + torch.einsum("nab,fnb->fna", rotation, correction)
-
-    def stream(self, garment, body_shape: Tensor, fps: float, timer=None) -> "SwinGarStream":
-        """Frame-by-frame inference with a rolling cache
-        (:class:`~swingar_pyg.models.streaming.SwinGarStream`)."""
-        from swingar_pyg.models.streaming import SwinGarStream
-
-        return SwinGarStream(self, garment, body_shape, fps, timer)
 
     def forward(self, data) -> EstimatorOutput:
         _check_window(data, self.num_joints, self.history)

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.spatial import cKDTree
 
-from swingar_pyg.geometry.distance import signed_distance_to_surface
+from swingar_pyg.geometry.signed_distance import closest_face_signed_distance
 from swingar_pyg.geometry.mesh import Mesh, as_mesh, boundary_edges, mesh_edges
 from swingar_pyg.geometry.primitives import split_quads
 
@@ -61,9 +61,9 @@ class Garment:
             rigid skinning: those of the nearest body vertex, but for the pinned
             bands, each of which follows the torso's joints as one
             (:func:`transfer_skinning`).
-        fit: ``(N,)`` the fit attribute: signed distance (m) from the body surface in
-            the rest pose, positive outside
-            (:func:`~swingar_pyg.geometry.distance.signed_distance_to_surface`).
+        fit: ``(N,)`` the fit attribute: clearance (m) from the body surface in the
+            rest pose, positive outside: minus the body's signed distance
+            (:func:`~swingar_pyg.geometry.closest_face_signed_distance`).
     """
 
     name: str
@@ -300,7 +300,7 @@ def procedural_skirt(spec: SkirtSpec, body_vertices: np.ndarray, body_faces: np.
     indices, weights = transfer_skinning(mesh, index[0], body_vertices, joint_names,
                                          skin_indices, skin_weights)
     pinned = index[0].copy()
-    fit = signed_distance_to_surface(mesh.vertices, body_vertices, body_faces)
+    fit = -closest_face_signed_distance(mesh.vertices, body_vertices, body_faces)
     return Garment(spec.name, mesh, pinned, indices, weights, fit)
 
 
@@ -405,5 +405,5 @@ def garment_on_body(name: str, mesh: Mesh, body: "BodyModel", shape,
     indices, weights = body.skinning()
     skin_indices, skin_weights = transfer_skinning(mesh, pinned, rest, body.joint_names,
                                                    indices.numpy(), weights.numpy())
-    fit = signed_distance_to_surface(mesh.vertices, rest, faces)
+    fit = -closest_face_signed_distance(mesh.vertices, rest, faces)
     return Garment(name, mesh, pinned, skin_indices, skin_weights, fit)

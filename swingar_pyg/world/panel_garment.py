@@ -18,7 +18,7 @@ plane :math:`m = (y_f + y_b) / 2` as it nears a seam, with an elliptic profile
 
 :math:`d` its distance to the nearest seam and :math:`r` the taper radius. Vertices
 still closer to the body than the clearance are moved out along the exact
-outward normal (:class:`~swingar_pyg.collision.reference.BodySurface`). Pinning,
+outward normal (:class:`~swingar_pyg.geometry.signed_distance.BodySurface`). Pinning,
 skinning and the fit attribute are those of
 :func:`~swingar_pyg.world.garment.garment_on_body`.
 """
@@ -405,7 +405,7 @@ def push_out(mesh: Mesh, body_vertices: np.ndarray, body_faces: np.ndarray,
     """``mesh`` with every vertex nearer the body than ``clearance`` (or inside it)
     moved out along the body's outward normal to ``clearance``; again, up to
     ``passes`` times, where a move brought a vertex near another part (a crease)."""
-    from swingar_pyg.collision.reference import BodySurface
+    from swingar_pyg.geometry.signed_distance import BodySurface
 
     surface = BodySurface(body_vertices, body_faces)
     vertices = mesh.vertices.copy()

@@ -43,7 +43,7 @@ class SimulatedSequence:
     def with_exact_penetration(self, faces: Tensor) -> "SimulatedSequence":
         """This sequence with :attr:`penetration_exact` measured against the body of
         triangles ``faces`` (about 30 ms a frame for a 14k-vertex body)."""
-        from swingar_pyg.collision.reference import inside_share
+        from swingar_pyg.geometry.signed_distance import inside_share
 
         free = np.setdiff1d(np.arange(self.garment.mesh.num_vertices), self.garment.pinned)
         share = inside_share(self.body_vertices.numpy(), faces.numpy(),

@@ -34,6 +34,8 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from swingar_pyg.inference.streaming import SwinGarStream
+
 
 @dataclass
 class StageCost:
@@ -317,7 +319,7 @@ class ScenePipeline:
 
     def _stream(self, graph, posed, timer: StageTimer, progress: bool) -> Tensor:
         s = self.scene
-        stream = self.estimator.stream(graph, s.body_shape, s.motion.fps, timer=timer)
+        stream = SwinGarStream(self.estimator, graph, s.body_shape, s.motion.fps, timer=timer)
         # A frame whose window (m + 1 poses) and cached skinned frames (3) all equal the
         # previous frame's gives the previous output again: reuse it.
         still = self.estimator.history + 3

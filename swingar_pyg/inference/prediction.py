@@ -4,7 +4,7 @@ animates any garment mesh on any motion, and the frames are exported.
 The garment need not come from the training data: any mesh dressed on the
 body's rest pose (metres, +Z up) gets its graph, normals, fit attribute,
 transferred skinning and descriptor here, then the motion is streamed through
-:class:`~swingar_pyg.models.SwinGarStream` one frame at a time.
+:class:`~swingar_pyg.inference.SwinGarStream` one frame at a time.
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ import numpy as np
 import torch
 
 from swingar_pyg.atomic import atomic_path
+from swingar_pyg.inference.streaming import SwinGarStream
 from swingar_pyg.models import GarmentWindow, SwinGarEstimator
 from swingar_pyg.models.garment_window import dense_skinning_weights, garment_graph_features
 
@@ -47,7 +48,7 @@ def animate(estimator: SwinGarEstimator, graph: GarmentWindow, body_shape: torch
             progress: bool = True) -> tuple[torch.Tensor, np.ndarray]:
     """Streams a posed motion; returns the garment ``(T, N, 3)`` and the
     seconds each frame took."""
-    stream = estimator.stream(graph, body_shape, fps)
+    stream = SwinGarStream(estimator, graph, body_shape, fps)
     frames = range(len(rotations))
     if progress:
         from tqdm import tqdm
@@ -99,7 +100,7 @@ def inside_counts(before: torch.Tensor, after: torch.Tensor, posed, body_faces: 
                   progress: bool = True) -> dict:
     """Garment vertices inside the posed body (exact SDF) before and after the
     collision pass, over all frames ``(T, N, 3)``."""
-    from swingar_pyg.collision.reference import BodySurface
+    from swingar_pyg.geometry.signed_distance import BodySurface
 
     frames = range(len(before))
     if progress:
@@ -122,13 +123,13 @@ def predict_to_folder(checkpoint: str, garment: str, motion: str, out: str | Pat
     (a procedural family, a shipped clip or a ``.bvh`` path) and writes to
     ``out``: ``frames/frame_0000.obj`` …, ``garment.npz`` (all frames, faces,
     body shape), ``preview.gif`` and ``summary.json`` (with what each stage of
-    the :class:`~swingar_pyg.scene.Scene` pipeline cost). With ``collisions``,
+    the :class:`~swingar_pyg.inference.scene.Scene` pipeline cost). With ``collisions``,
     vertices inside the body are moved out: by the neural body SDF of the
     checkpoint ``body_sdf`` if given, else by the exact one."""
     from swingar_pyg.world.body import AnnyBody
     from swingar_pyg.world.motion_library import make_motion
 
-    from swingar_pyg.scene import Scene, compile_scene
+    from swingar_pyg.inference.scene import Scene, compile_scene
 
     estimator, data_settings = load_estimator(checkpoint)
     body = AnnyBody()

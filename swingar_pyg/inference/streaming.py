@@ -36,7 +36,7 @@ class SwinGarStream:
         timer: called with a stage name (``"motion code"``, ``"skinning (E, P,
             LBS)"``, ``"detail (M_d)"``), returns a context manager around that
             stage of each step that yields a function taking the stage's output
-            tensors (:class:`~swingar_pyg.scene.StageTimer`).
+            tensors (:class:`~swingar_pyg.inference.scene.StageTimer`).
     """
 
     def __init__(self, estimator: SwinGarEstimator, garment, body_shape: Tensor, fps: float,
