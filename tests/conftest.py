@@ -1,6 +1,8 @@
 import pytest
 import torch
 
+from tests.extras import require
+
 # Two threads on a busy 2-core machine can be 10x slower than one.
 torch.set_num_threads(1)
 
@@ -13,8 +15,8 @@ def _seed():
 @pytest.fixture(scope='session')
 def tiny_windows(tmp_path_factory):
     """A prepared SwinGarDataModule over a tiny simulated dataset."""
-    pytest.importorskip('anny')
-    pytest.importorskip('lightning')
+    require('anny')
+    require('lightning')
     from datamodules import SwinGarDataModule
     from tests.windows import SMALL_FEATURES, write_tiny_config
 

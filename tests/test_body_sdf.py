@@ -8,6 +8,7 @@ from swingar_pyg.collision import resolve_collisions
 from swingar_pyg.geometry.bones import bone_segments, distance_to_bones
 from swingar_pyg.geometry.skinning import axis_angle_to_matrix
 from swingar_pyg.models import BodySDF
+from tests.extras import require
 
 # A toy rig: a chain of three joints along +x (an "arm"), and its body: capsules of
 # radius R around the two bones, whose exact SDF (positive inside) is analytic.
@@ -164,7 +165,7 @@ def test_network_on_extreme_and_bad_input():
 @pytest.fixture(scope='module')
 def trained_chain():
     """A BodySDF trained with BodySDFModule's loss on the capsule chain at random bends."""
-    pytest.importorskip('lightning')
+    require('lightning')
     from swingar_pyg.training import BodySDFModule
 
     torch.manual_seed(0)
@@ -222,7 +223,7 @@ def test_correction_with_the_network_leaves_no_vertex_inside(trained_chain):
 
 
 def test_anny_rig_is_the_default_and_broad_phase_holds_extreme_poses():
-    pytest.importorskip('anny')
+    require('anny')
     from swingar_pyg.collision.broad_phase import BoneCapsules
     from swingar_pyg.models.body_sdf import ANNY_CMU_MB_PARENTS
     from swingar_pyg.world.body import AnnyBody

@@ -5,6 +5,7 @@ from scipy.spatial.transform import Rotation
 
 from swingar_pyg.world.bvh import read_bvh
 from swingar_pyg.world.motion import ease_from_rest, mirror_motion, procedural_motion
+from tests.extras import require
 from tests.test_world import CMU_JOINTS
 
 CHAIN = """HIERARCHY
@@ -137,7 +138,7 @@ def test_mirror_twice_is_the_identity():
 
 @pytest.fixture(scope='module')
 def anny_body():
-    pytest.importorskip('anny')
+    require('anny')
     from swingar_pyg.world.body import AnnyBody
 
     return AnnyBody()

@@ -11,6 +11,7 @@ from swingar_pyg.geometry import (
     roll_into_cylinder,
     sheet,
 )
+from tests.extras import require
 
 RADIUS = 0.3
 
@@ -29,7 +30,7 @@ def tube(radius: float, height: float = 0.4, rows: int = 8, cols: int = 24):
 
 
 def test_exact_reference_sign_and_normal_on_a_sphere_mesh():
-    trimesh = pytest.importorskip('trimesh')
+    trimesh = require('trimesh')
     ball = trimesh.creation.icosphere(subdivisions=5, radius=RADIUS)
     directions = torch.nn.functional.normalize(torch.randn(200, 3, dtype=torch.float64), dim=-1)
     radii = torch.empty(200, dtype=torch.float64).uniform_(0.05, 0.6)
@@ -43,7 +44,7 @@ def test_exact_reference_sign_and_normal_on_a_sphere_mesh():
 
 
 def test_inside_share_counts_points_inside_a_moving_sphere_mesh():
-    trimesh = pytest.importorskip('trimesh')
+    trimesh = require('trimesh')
 
     ball = trimesh.creation.icosphere(subdivisions=4, radius=RADIUS)
     generator = np.random.default_rng(0)
@@ -61,7 +62,7 @@ def test_inside_share_counts_points_inside_a_moving_sphere_mesh():
 
 
 def test_exact_reference_on_the_body_in_the_armpit_and_crotch():
-    pytest.importorskip('anny')
+    require('anny')
     from swingar_pyg.geometry import vertex_normals
     from swingar_pyg.world.body import AnnyBody
 

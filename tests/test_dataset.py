@@ -7,6 +7,7 @@ import pytest
 
 from swingar_pyg.sim import STRETCH_BAR
 from swingar_pyg.world.dataset import DatasetConfig, job_recipe, make_dataset, plan_jobs
+from tests.extras import require
 
 TINY = """
 name: tiny
@@ -61,7 +62,7 @@ def test_config_errors_name_the_problem(tmp_path):
 
 
 def test_generation_resumes_and_merges(tmp_path):
-    pytest.importorskip('anny')
+    require('anny')
     config = tiny_config(tmp_path)
     first = make_dataset(config, progress=False)
     assert first['generated'] == 3 and first['splits']['train']['complete']
@@ -122,7 +123,7 @@ def test_generation_resumes_and_merges(tmp_path):
 
 
 def test_shards_split_the_jobs_and_merge_when_all_are_done(tmp_path):
-    pytest.importorskip('anny')
+    require('anny')
     config = tiny_config(tmp_path)
     first = make_dataset(config, shard=(0, 2), progress=False)
     assert first['generated'] == 2  # jobs 0 and 2 of 3

@@ -3,11 +3,11 @@
 import os
 from pathlib import Path
 
-import pytest
+from tests.extras import require
 
-pytest.importorskip('anny')
-nbformat = pytest.importorskip('nbformat')
-nbclient = pytest.importorskip('nbclient')
+require('anny')
+nbformat = require('nbformat')
+nbclient = require('nbclient')
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -11,6 +11,7 @@ from swingar_pyg.world.panel_garment import (
     sew_panels,
     triangulate_pattern,
 )
+from tests.extras import require
 
 
 def euler_and_loops(faces: np.ndarray) -> tuple[int, int, int]:
@@ -48,7 +49,7 @@ def test_two_sewn_panels_close_into_a_bag_or_a_tube(opening, expected):
 
 @pytest.fixture(scope='module')
 def anny():
-    pytest.importorskip('anny')
+    require('anny')
     from swingar_pyg.world.body import AnnyBody
 
     body = AnnyBody()

@@ -4,10 +4,11 @@ import numpy as np
 import pytest
 import torch
 
+from tests.extras import require
 from tests.windows import SMALL_ESTIMATOR, SMALL_FEATURES
 
-pytest.importorskip('anny')
-pytest.importorskip('lightning')
+require('anny')
+require('lightning')
 
 
 @pytest.fixture(scope='module')

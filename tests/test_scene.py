@@ -5,9 +5,10 @@ import torch
 
 from swingar_pyg.models import SwinGarEstimator
 from swingar_pyg.inference.scene import GarmentFeatureCache, Scene, compile_scene
+from tests.extras import require
 from tests.windows import SMALL_ESTIMATOR
 
-pytest.importorskip('anny')
+require('anny')
 
 
 @pytest.fixture(scope='module')

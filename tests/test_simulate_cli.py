@@ -3,10 +3,11 @@ import numpy as np
 import pytest
 
 from swingar_pyg.cli import main
+from tests.extras import require
 
 
 def test_simulate_writes_a_sequence_file_and_a_preview(tmp_path, capsys):
-    pytest.importorskip('anny')
+    require('anny')
     out = tmp_path / 'run'
     assert main(['simulate', '--motion', 'twist', '--seconds', '0.4', '--vertices', '200',
                  '--substeps', '10', '--out', str(out)]) == 0
@@ -26,8 +27,8 @@ def test_simulate_writes_a_sequence_file_and_a_preview(tmp_path, capsys):
 
 
 def test_simulate_with_the_vbd_solver_stores_its_settings(tmp_path, capsys):
-    pytest.importorskip('anny')
-    pytest.importorskip('newton')
+    require('anny')
+    require('newton')
     import json
 
     out = tmp_path / 'run'
@@ -42,7 +43,7 @@ def test_simulate_with_the_vbd_solver_stores_its_settings(tmp_path, capsys):
 
 
 def test_simulate_with_dihedral_bending_stores_the_model(tmp_path, capsys):
-    pytest.importorskip('anny')
+    require('anny')
     import json
 
     out = tmp_path / 'run'
@@ -59,7 +60,7 @@ def test_simulate_with_dihedral_bending_stores_the_model(tmp_path, capsys):
 
 
 def test_simulate_with_error_controlled_substeps_records_them(tmp_path, capsys):
-    pytest.importorskip('anny')
+    require('anny')
     import json
 
     out = tmp_path / 'run'
@@ -93,7 +94,7 @@ def test_simulate_with_error_controlled_substeps_records_them(tmp_path, capsys):
 
 
 def test_simulate_a_sewn_jumpsuit(tmp_path, capsys):
-    pytest.importorskip('anny')
+    require('anny')
     out = tmp_path / 'run'
     assert main(['simulate', '--kind', 'jumpsuit', '--motion', 'walk', '--seconds', '0.2',
                  '--vertices', '300', '--substeps', '5', '--no-preview', '--out', str(out)]) == 0
@@ -104,7 +105,7 @@ def test_simulate_a_sewn_jumpsuit(tmp_path, capsys):
 
 
 def test_simulate_a_skirt_with_a_slit(tmp_path, capsys):
-    pytest.importorskip('anny')
+    require('anny')
     out = tmp_path / 'run'
     assert main(['simulate', '--length', '0.7', '--slit', '0.3', '--motion', 'walk',
                  '--seconds', '0.2', '--vertices', '300', '--substeps', '5', '--no-preview',
@@ -116,14 +117,14 @@ def test_simulate_a_skirt_with_a_slit(tmp_path, capsys):
 
 
 def test_simulate_rejects_an_unknown_motion(tmp_path, capsys):
-    pytest.importorskip('anny')
+    require('anny')
     with pytest.raises(SystemExit):
         main(['simulate', '--motion', 'moonwalk', '--out', str(tmp_path)])
     assert "unknown motion 'moonwalk'" in capsys.readouterr().err
 
 
 def test_preview_renders_a_stored_sequence(tmp_path, capsys):
-    pytest.importorskip('anny')
+    require('anny')
     out = tmp_path / 'run'
     assert main(['simulate', '--motion', 'sway', '--seconds', '0.2', '--vertices', '150',
                  '--substeps', '5', '--out', str(out), '--no-preview']) == 0

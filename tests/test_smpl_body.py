@@ -7,7 +7,9 @@ import numpy as np
 import pytest
 import torch
 
-smplx = pytest.importorskip('smplx')
+from tests.extras import require
+
+smplx = require('smplx')
 
 from swingar_pyg.world.smpl_body import SMPL_JOINTS, SMPL_TO_Z_UP, SMPLBody  # noqa: E402
 

@@ -4,8 +4,9 @@ import pytest
 
 from swingar_pyg.eval.stability import (SMALL, Case, available_cases, run_case, run_stability,
                                         stability_summary, stability_table)
+from tests.extras import require
 
-pytest.importorskip('anny')
+require('anny')
 
 
 def test_every_stage_is_finite_within_its_bound_or_raises_a_clear_error_on_hard_input():

@@ -7,9 +7,10 @@ import torch
 from torch_geometric.data import Batch
 
 from swingar_pyg.models import SwinGarEstimator
+from tests.extras import require
 from tests.windows import SMALL_ESTIMATOR, SMALL_FEATURES
 
-L = pytest.importorskip('lightning')
+L = require('lightning')
 
 
 def test_overfits_one_short_sequence(tiny_windows):

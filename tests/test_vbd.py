@@ -9,8 +9,9 @@ from swingar_pyg.geometry import as_mesh, sheet
 from swingar_pyg.sim import BodyCollider, VBDCloth, VBDSettings, XPBDCloth, XPBDSettings
 
 from .test_xpbd import hanging_sheet
+from tests.extras import require
 
-pytest.importorskip("newton")
+require('newton')
 
 
 def run(mesh, pinned, frames=20, settings=None, collider=None, targets=None):

@@ -10,6 +10,7 @@ from swingar_pyg.geometry.mesh import as_mesh
 from swingar_pyg.world.garment import (DressSpec, SkirtSpec, body_envelope, fit_procedural_skirt,
                                       pin_bands, procedural_skirt)
 from swingar_pyg.world.motion import EXTREME_MOTIONS, PROCEDURAL_MOTIONS, procedural_motion
+from tests.extras import require
 
 CMU_JOINTS = ('Hips', 'LHipJoint', 'LeftUpLeg', 'LeftLeg', 'LeftFoot', 'LowerBack', 'Spine',
               'Spine1', 'LeftArm', 'RHipJoint', 'RightUpLeg', 'RightLeg', 'RightFoot',
@@ -192,7 +193,7 @@ def test_skirt_spec_validation(kwargs, message):
 
 @pytest.fixture(scope='module')
 def anny_body():
-    pytest.importorskip('anny')
+    require('anny')
     from swingar_pyg.world.body import AnnyBody
 
     return AnnyBody()
@@ -339,7 +340,7 @@ def test_a_dress_top_band_moves_as_one_where_the_body_skin_stretches(anny_body):
 
 
 def test_dress_hangs_from_the_chest_and_shipped_garments_pin_all_their_top_loops():
-    pytest.importorskip('anny')
+    require('anny')
     from swingar_pyg.world.body import AnnyBody
     from swingar_pyg.world.garment import DressSpec, ShippedGarmentSpec, fit_garment
 
