@@ -50,14 +50,20 @@ def test_predict_animates_a_garment_of_unseen_topology_from_an_obj(checkpoint, t
     counts = summary['collisions']
     assert counts['inside_after'] <= counts['inside_before']
     assert counts['inside_after'] <= 0.005 * counts['vertex_frames']
-    # near the body: no vertex farther from the posed body than 10 cm beyond the
-    # farthest it stands at rest (a flared hem stands well off the legs)
+    # near the body: no vertex farther from the posed body than 3 cm beyond where it
+    # stands off the rest body (a flared hem stands up to 46 cm off the legs). Each
+    # vertex moves with the body it is skinned to, so its distance to the body changes
+    # only as the limbs move relative to each other: measured at most 12 mm farther
+    # (the kicking leg mostly comes closer). It was the farthest vertex within 10 cm of
+    # the farthest rest distance, which a garment sliding several cm off passed.
     from swingar_pyg.world.motion_library import make_motion
 
     clip = make_motion('kick', body, shape, seconds=0.5)
     posed = body.pose(shape, clip.rotations, clip.translation).vertices
     nearest = torch.cdist(torch.as_tensor(vertices), posed).min(dim=-1).values
-    assert float(nearest.max()) < float(skirt.fit.max()) + 0.10
+    rest = torch.as_tensor(skirt.mesh.vertices, dtype=posed.dtype)
+    at_rest = torch.cdist(rest, body.rest_vertices(shape).to(posed.dtype)).min(dim=-1).values
+    assert float((nearest - at_rest).max()) < 0.03
 
 
 def test_predict_finds_collisions_with_the_neural_body_sdf(checkpoint, tiny_body_sdf, tmp_path,

@@ -60,8 +60,12 @@ def test_cli_fits_from_the_quickstart_config_and_resumes(tiny_windows, tmp_path)
     last = tmp_path / 'checkpoints' / 'last.ckpt'
     metrics = (tmp_path / 'logs' / 'version_0' / 'metrics.csv').read_text().splitlines()
     rows = list(csv.DictReader(metrics))
-    errors = [float(r['val/estimator_mean_mm']) for r in rows if r.get('val/estimator_mean_mm')]
-    assert len(errors) == 2 and all(0 < e < 1e3 for e in errors)
+    errors = [(float(r['val/estimator_mean_mm']), float(r['val/rigid_mean_mm']))
+              for r in rows if r.get('val/estimator_mean_mm')]
+    # The untrained estimator is exactly rigid skinning, and two or four Adam steps move it
+    # little: within twice rigid skinning's error on the same windows (measured 21.9 and
+    # 23.1 mm against 17.8 mm, 1.2-1.3x). It was 0 < e < 1 m, which a diverged model passed.
+    assert len(errors) == 2 and all(0 < e < 2 * rigid for e, rigid in errors), errors
     # the checkpoint is self-contained: the estimator comes back from its config
     module = SwinGarModule.load_from_checkpoint(last)
     assert module.estimator.history == SMALL_FEATURES['history']
