@@ -51,6 +51,7 @@ from swingar_pyg.collision import (  # noqa: E402
     resolve_collisions,
 )
 from swingar_pyg.models.losses import uniform_laplacian  # noqa: E402
+from swingar_pyg.training import load_body_sdf, load_estimator  # noqa: E402
 from swingar_pyg.world.body import AnnyBody  # noqa: E402
 from swingar_pyg.world.sequence_file import read_garment, read_sequence  # noqa: E402
 
@@ -69,7 +70,7 @@ def garment_frames(data: Path, checkpoint: str | None, every: int, sequences: in
     import h5py
 
     from swingar_pyg.geometry import mesh_edge_index
-    from swingar_pyg.inference.prediction import animate, garment_graph, load_estimator
+    from swingar_pyg.inference.prediction import animate, garment_graph
 
     with h5py.File(data, "r") as file:
         ids = sorted(file["sequences"])[:sequences]
@@ -294,13 +295,13 @@ def main() -> None:
     estimator = None if args.estimator in (None, "none") else args.estimator
     every, count = (10, 2) if args.quick else (args.every, None)
     sequences = list(garment_frames(Path(args.data), estimator, every, count, body))
+    body_sdf = load_body_sdf(args.body_sdf)
     cache: dict = {}
 
     def neural_for(shape):
         key = tuple(shape.tolist())
         if key not in cache:
-            cache[key] = NeuralCollisions.from_checkpoint(args.body_sdf, body, shape,
-                                                          offset=args.offset)
+            cache[key] = NeuralCollisions.for_body(body_sdf, body, shape, offset=args.offset)
         return cache[key]
 
     methods = run_methods(sequences, neural_for, body.faces, args.offset)

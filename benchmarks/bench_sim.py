@@ -45,7 +45,7 @@ from common import (  # noqa: E402
 
 from swingar_pyg.sim import SIMULATOR_REVISION, STRETCH_BAR, XPBDSettings  # noqa: E402
 from swingar_pyg.world.body import AnnyBody  # noqa: E402
-from swingar_pyg.world.garment import SkirtSpec, fit_procedural_skirt  # noqa: E402
+from swingar_pyg.world.skirt import SkirtSpec, fit_procedural_skirt  # noqa: E402
 from swingar_pyg.world.motion import procedural_motion  # noqa: E402
 from swingar_pyg.world.sequence import simulate_sequence  # noqa: E402
 

@@ -69,7 +69,7 @@ from swingar_pyg.sim.recording import (  # noqa: E402
     stretch_by_place,
 )
 from swingar_pyg.world.body import AnnyBody  # noqa: E402
-from swingar_pyg.world.garment import SkirtSpec, fit_procedural_skirt  # noqa: E402
+from swingar_pyg.world.skirt import SkirtSpec, fit_procedural_skirt  # noqa: E402
 from swingar_pyg.world.motion import procedural_motion  # noqa: E402
 from swingar_pyg.world.sequence import simulate_sequence  # noqa: E402
 

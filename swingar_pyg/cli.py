@@ -28,7 +28,7 @@ def _simulate(args: argparse.Namespace) -> int:
     from swingar_pyg.sim import VBDSettings, XPBDSettings
     from swingar_pyg.viz.preview import render_sequence
     from swingar_pyg.world.body import AnnyBody
-    from swingar_pyg.world.garment import fit_garment, garment_spec
+    from swingar_pyg.world.catalogue import fit_garment, garment_spec
     from swingar_pyg.world.motion_library import make_motion
     from swingar_pyg.world.sequence import simulate_sequence
     from swingar_pyg.world.sequence_file import write_sequences
@@ -281,10 +281,14 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _predict(args: argparse.Namespace) -> int:
     from swingar_pyg.inference.prediction import predict_to_folder
+    from swingar_pyg.training import load_body_sdf, load_estimator
 
-    summary = predict_to_folder(args.ckpt, args.garment, args.motion, args.out,
+    estimator, data_settings = load_estimator(args.ckpt)
+    body_sdf = load_body_sdf(args.body_sdf) if args.body_sdf else None
+    summary = predict_to_folder(estimator, args.garment, args.motion, args.out,
                                 args.body_shape, args.seconds, args.preview,
-                                collisions=args.collisions, body_sdf=args.body_sdf)
+                                collisions=args.collisions, body_sdf=body_sdf,
+                                data_settings=data_settings, checkpoint=args.ckpt)
     from swingar_pyg.inference.scene import StageCost, stage_table
 
     print(stage_table([StageCost(**stage) for stage in summary["stages"]]))

@@ -137,7 +137,8 @@ def test_shards_split_the_jobs_and_merge_when_all_are_done(tmp_path):
 
 
 def test_configs_take_dresses_and_shipped_garments(tmp_path):
-    from swingar_pyg.world.garment import DressSpec, ShippedGarmentSpec, SkirtSpec
+    from swingar_pyg.world.catalogue import ShippedGarmentSpec
+    from swingar_pyg.world.skirt import DressSpec, SkirtSpec
 
     text = TINY.replace('garments: [{{length: 0.6, flare: 0.4, vertices: 130}}]',
                         'garments: [{{kind: dress, length: 0.9, vertices: 300}}, '

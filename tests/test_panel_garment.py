@@ -3,7 +3,7 @@ import pytest
 import torch
 
 from swingar_pyg.geometry.mesh import boundary_edges
-from swingar_pyg.world.garment import fit_garment, garment_spec
+from swingar_pyg.world.catalogue import fit_garment, garment_spec
 from swingar_pyg.world.panel_garment import (
     JumpsuitSpec,
     Pattern,

@@ -30,7 +30,7 @@ def test_predict_animates_a_garment_of_unseen_topology_from_an_obj(checkpoint, t
     from swingar_pyg.cli import main
     from swingar_pyg.inference.prediction import write_obj
     from swingar_pyg.world.body import AnnyBody
-    from swingar_pyg.world.garment import SkirtSpec, fit_procedural_skirt
+    from swingar_pyg.world.skirt import SkirtSpec, fit_procedural_skirt
 
     body = AnnyBody()
     shape = body.default_shape()

@@ -14,7 +14,7 @@ require('anny')
 @pytest.fixture(scope='module')
 def world():
     from swingar_pyg.world.body import AnnyBody
-    from swingar_pyg.world.garment import SkirtSpec, fit_procedural_skirt
+    from swingar_pyg.world.skirt import SkirtSpec, fit_procedural_skirt
 
     body = AnnyBody()
     shape = body.default_shape()
@@ -102,12 +102,12 @@ def test_a_static_pose_window_reuses_the_last_output(world):
 
 
 def test_cached_features_are_not_recomputed(world, monkeypatch, tmp_path):
-    import swingar_pyg.models.garment_window as garment_window
+    import swingar_pyg.inference.scene as scene
 
     body, shape, skirts, estimator = world
     computed = []
-    original = garment_window.garment_graph_features
-    monkeypatch.setattr(garment_window, 'garment_graph_features',
+    original = scene.garment_graph_features
+    monkeypatch.setattr(scene, 'garment_graph_features',
                         lambda *a, **k: computed.append(1) or original(*a, **k))
     motion = kick(body, shape, seconds=0.2)
     cache = GarmentFeatureCache(tmp_path)

@@ -7,8 +7,9 @@ import torch
 from swingar_pyg.geometry import closest_face_signed_distance, split_quads, vertex_normals
 from swingar_pyg.geometry.skinning import linear_blend_skinning
 from swingar_pyg.geometry.mesh import as_mesh
-from swingar_pyg.world.garment import (DressSpec, SkirtSpec, body_envelope, fit_procedural_skirt,
-                                      pin_bands, procedural_skirt)
+from swingar_pyg.world.garment import pin_bands
+from swingar_pyg.world.skirt import (DressSpec, SkirtSpec, body_envelope, fit_procedural_skirt,
+                                     procedural_skirt)
 from swingar_pyg.world.motion import EXTREME_MOTIONS, PROCEDURAL_MOTIONS, procedural_motion
 from tests.extras import require
 
@@ -306,7 +307,7 @@ def test_a_dress_top_band_moves_as_one_where_the_body_skin_stretches(anny_body):
     from swingar_pyg.geometry.mesh import mesh_edges
     from swingar_pyg.sim import BodyCollider
     from swingar_pyg.sim.recording import signed_edge_strain
-    from swingar_pyg.world.garment import fit_garment
+    from swingar_pyg.world.catalogue import fit_garment
 
     shape = anny_body.default_shape()
     dress = fit_garment(DressSpec(length=0.9, vertices=1000), anny_body, shape)
@@ -342,7 +343,8 @@ def test_a_dress_top_band_moves_as_one_where_the_body_skin_stretches(anny_body):
 def test_dress_hangs_from_the_chest_and_shipped_garments_pin_all_their_top_loops():
     require('anny')
     from swingar_pyg.world.body import AnnyBody
-    from swingar_pyg.world.garment import DressSpec, ShippedGarmentSpec, fit_garment
+    from swingar_pyg.world.catalogue import ShippedGarmentSpec, fit_garment
+    from swingar_pyg.world.skirt import DressSpec
 
     body = AnnyBody()
     shape = body.default_shape()

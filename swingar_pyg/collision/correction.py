@@ -3,7 +3,7 @@ inside the body move out, each by its own depth plus the offset its
 non-colliding neighbours keep, so the corrected patch follows its surroundings
 instead of bulging.
 
-With :math:`S(\mathbf{x}) > 0` inside the body (:mod:`.reference`) and the
+With :math:`S(\mathbf{x}) > 0` inside the body (:mod:`swingar_pyg.geometry.signed_distance`) and the
 outward direction :math:`\mathbf{n} = -\nabla S / \lVert \nabla S \rVert`, a
 colliding vertex :math:`i` moves by
 
@@ -15,7 +15,9 @@ colliding vertex :math:`i` moves by
     {2\sigma^2}\Bigr)
 
 over its non-colliding mesh neighbours :math:`k` (:math:`\delta_i = 0` without
-any). Moving some vertices can leave others, or create new contacts, so the
+any). Where :math:`\delta_i` would carry a vertex into the body again (across a
+narrow gap, between the legs), the vertex moves by its own depth alone and lands
+on the surface. Moving some vertices can leave others, or create new contacts, so the
 step repeats a few times. The baseline (TailorNet's post-process) pushes every
 colliding vertex to a fixed offset outside the surface instead.
 """
@@ -27,8 +29,12 @@ from typing import Callable
 
 import torch
 import torch.nn.functional as F
+from scipy.spatial import cKDTree
 from torch import Tensor
 from torch_geometric.utils import scatter
+
+from swingar_pyg.geometry.normals import vertex_normals
+from swingar_pyg.geometry.signed_distance import BodySurface
 
 SignedDistance = Callable[..., tuple[Tensor, Tensor]]
 """Maps points ``(M, 3)`` to ``S`` ``(M,)`` (positive inside) and ``∇S`` ``(M, 3)``;
@@ -104,7 +110,15 @@ def resolve_collisions(vertices: Tensor, edge_index: Tensor, signed_distance: Si
                          dim_size=len(x), reduce="sum")
         total = scatter(weight, dst, dim=0, dim_size=len(x), reduce="sum")
         delta = torch.where(total > 0, spread / total.clamp_min(1e-30), torch.zeros_like(total))
-        step = _outward(gradient) * (depth + delta).unsqueeze(-1)
+        outward = _outward(gradient)
+        step = outward * (depth + delta).unsqueeze(-1)
+        pushed = (colliding & (delta > 0)).nonzero().squeeze(-1)
+        if len(pushed):
+            arguments = (x[pushed] + step[pushed],) if body_index is None else \
+                (x[pushed] + step[pushed], body_index[pushed])
+            lands_inside = signed_distance(*arguments)[0] + offset > 0
+            overshoot = pushed[lands_inside]
+            step[overshoot] = outward[overshoot] * depth[overshoot].unsqueeze(-1)
         x = torch.where(colliding.unsqueeze(-1), x + step, x)
         moved |= colliding
     return Correction(x, moved, run)
@@ -124,8 +138,6 @@ def fixed_offset_push(vertices: Tensor, signed_distance: SignedDistance,
 def exact_signed_distance(body_vertices: Tensor, body_faces: Tensor) -> SignedDistance:
     """:math:`S` and :math:`\\nabla S` of a posed body mesh, exactly (slow: the
     reference for metrics and for checking the network)."""
-    from swingar_pyg.geometry.signed_distance import BodySurface
-
     surface = BodySurface(body_vertices.detach().cpu().numpy(), body_faces.cpu().numpy())
 
     def evaluate(points: Tensor) -> tuple[Tensor, Tensor]:
@@ -142,10 +154,6 @@ def nearest_vertex_signed_distance(body_vertices: Tensor, body_faces: Tensor) ->
     :math:`\mathbf{n}_b` its normal, :math:`\nabla S = -\mathbf{n}_b`. Fast (a
     KD-tree), but the nearest vertex's tangent plane is not the surface where
     the surface curves within a vertex spacing (armpits, crotch, fingers)."""
-    from scipy.spatial import cKDTree
-
-    from swingar_pyg.geometry.normals import vertex_normals
-
     normals = vertex_normals(body_vertices, body_faces)
     tree = cKDTree(body_vertices.detach().cpu().numpy())
 

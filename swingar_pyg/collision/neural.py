@@ -4,13 +4,13 @@ the neighbour-aware correction on the vertices that could be inside."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
 from torch import Tensor
 
 from swingar_pyg.collision.broad_phase import BoneCapsules
 from swingar_pyg.collision.correction import Correction, resolve_collisions
 from swingar_pyg.models.body_sdf import BodySDF
+from swingar_pyg.world.body import BodyModel
 
 
 @dataclass
@@ -36,18 +36,18 @@ class NeuralCollisions:
     iterations: int = 3
 
     @classmethod
-    def from_checkpoint(cls, checkpoint: str | Path, body, body_shape: Tensor,
-                        **options) -> "NeuralCollisions":
-        """From a checkpoint of ``swingar fit -c configs/body_sdf.yaml`` and a
-        :class:`~swingar_pyg.world.body.BodyModel` (for the capsules)."""
-        from swingar_pyg.training import BodySDFModule
+    def for_body(cls, body_sdf: BodySDF, body: BodyModel, body_shape: Tensor,
+                 **options) -> NeuralCollisions:
+        """For ``body`` with ``body_shape``: a trained ``body_sdf`` (e.g.
+        :func:`~swingar_pyg.training.load_body_sdf` of a ``swingar fit -c
+        configs/body_sdf.yaml`` checkpoint) and the body's capsules.
 
-        if not Path(checkpoint).is_file():
-            raise ValueError(f"no body SDF checkpoint at {checkpoint}")
-        network = BodySDFModule.load_from_checkpoint(checkpoint, map_location="cpu").body_sdf
-        if tuple(network.parents) != tuple(body.parents):
+        Raises:
+            ValueError: if ``body_sdf`` was trained on another rig than ``body``'s.
+        """
+        if tuple(body_sdf.parents) != tuple(body.parents):
             raise ValueError("the body SDF was trained on another rig than this body's")
-        return cls(network.eval(), BoneCapsules.from_body(body, body_shape), body_shape,
+        return cls(body_sdf.eval(), BoneCapsules.from_body(body, body_shape), body_shape,
                    **options)
 
     def correct(self, vertices: Tensor, edge_index: Tensor, joint_transforms: Tensor,

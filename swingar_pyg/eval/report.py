@@ -206,7 +206,7 @@ def _test_split(dataset: str) -> Path:
 
 def _streaming_fps(estimator, body, vertices: tuple[int, ...], frames: int) -> list[dict]:
     from swingar_pyg.inference.prediction import garment_graph
-    from swingar_pyg.world.garment import SkirtSpec, fit_procedural_skirt
+    from swingar_pyg.world.skirt import SkirtSpec, fit_procedural_skirt
     from swingar_pyg.world.motion_library import make_motion
 
     shape = body.default_shape()
@@ -240,7 +240,7 @@ def run_report(config: ReportConfig, progress: bool = True, log=print) -> Path:
         evaluate_simulator,
         load_test_sequences,
     )
-    from swingar_pyg.inference.prediction import load_estimator
+    from swingar_pyg.training import load_body_sdf, load_estimator
     from swingar_pyg.world.body import AnnyBody
 
     out = Path(config.output)
@@ -251,13 +251,13 @@ def run_report(config: ReportConfig, progress: bool = True, log=print) -> Path:
     log(f"test split {test_path}: {len(sequences)} sequences")
     body_sdf = None
     if config.body_sdf is not None and any("neural" in m.collisions for m in config.models):
-        body_sdf = ensure_checkpoint(config.body_sdf, 0, config.train_missing)
+        body_sdf = load_body_sdf(ensure_checkpoint(config.body_sdf, 0, config.train_missing))
     handlers: dict = {}
 
     def neural(shape):
         key = tuple(shape.tolist())
         if key not in handlers:
-            handlers[key] = NeuralCollisions.from_checkpoint(body_sdf, body, shape)
+            handlers[key] = NeuralCollisions.for_body(body_sdf, body, shape)
         return handlers[key]
 
     results, checkpoints, per_model = [], {}, {}

@@ -116,7 +116,7 @@ class _Context:
 
     @cached_property
     def skirt(self):
-        from swingar_pyg.world.garment import SkirtSpec, fit_procedural_skirt
+        from swingar_pyg.world.skirt import SkirtSpec, fit_procedural_skirt
 
         return fit_procedural_skirt(SkirtSpec(length=0.6, flare=0.35,
                                               vertices=self.sizes.skirt_vertices),
@@ -150,10 +150,12 @@ class _Context:
     @cached_property
     def neural(self):
         from swingar_pyg.collision import NeuralCollisions
+        from swingar_pyg.training import load_body_sdf
 
         if self.body_sdf_checkpoint is None:
             return None
-        return NeuralCollisions.from_checkpoint(self.body_sdf_checkpoint, self.body, self.shape)
+        return NeuralCollisions.for_body(load_body_sdf(self.body_sdf_checkpoint), self.body,
+                                         self.shape)
 
 
 # ----------------------------------------------------------------------------- FCAConv
@@ -390,7 +392,7 @@ def _estimator_extreme(kind: str):
 
 def _estimator_large(context):
     from swingar_pyg.inference.prediction import garment_graph
-    from swingar_pyg.world.garment import SkirtSpec, fit_procedural_skirt
+    from swingar_pyg.world.skirt import SkirtSpec, fit_procedural_skirt
 
     vertices = 20 * context.sizes.skirt_vertices
     skirt = fit_procedural_skirt(SkirtSpec(length=0.8, vertices=vertices, jitter=0.3),

@@ -7,6 +7,7 @@ from swingar_pyg.inference.scene import (
     Scene,
     ScenePipeline,
     SceneResult,
+    Stage,
     StageCost,
     StageTimer,
     compile_scene,
@@ -14,6 +15,6 @@ from swingar_pyg.inference.scene import (
 )
 from swingar_pyg.inference.streaming import SwinGarStream
 
-__all__ = ["GarmentFeatureCache", "Scene", "ScenePipeline", "SceneResult", "StageCost",
-           "StageTimer", "SwinGarStream", "animate", "compile_scene", "garment_graph",
+__all__ = ["GarmentFeatureCache", "Scene", "ScenePipeline", "SceneResult", "Stage",
+           "StageCost", "StageTimer", "SwinGarStream", "animate", "compile_scene", "garment_graph",
            "stage_table"]

@@ -17,7 +17,7 @@ from torch_geometric.data import Batch, Data
 from tqdm import tqdm
 
 from swingar_pyg.geometry import mesh_edge_index, spectral_descriptor, vertex_normals
-from swingar_pyg.nn import FCAConv
+from swingar_pyg.nn import FCAStack
 from swingar_pyg.world.garment_assets import load_shipped_garment, shipped_garments
 
 
@@ -32,21 +32,6 @@ class GarmentReport:
     top_eigenvalues: np.ndarray
 
 
-class FCAStack(torch.nn.Module):
-    """Per-vertex features from a few FCAConv layers (the shape of SwinGar's M_g)."""
-
-    def __init__(self, in_channels: int, hidden: int, layers: int, alpha: float):
-        super().__init__()
-        sizes = [in_channels] + [hidden] * layers
-        self.convs = torch.nn.ModuleList(
-            FCAConv(a, b // 4, heads=4, alpha=alpha) for a, b in zip(sizes[:-1], sizes[1:]))
-
-    def forward(self, x: torch.Tensor, edge_index: torch.Tensor) -> torch.Tensor:
-        for conv in self.convs:
-            x = torch.nn.functional.elu(conv(x, edge_index))
-        return x
-
-
 def _milliseconds(start: float) -> float:
     return 1e3 * (time.perf_counter() - start)
 
@@ -56,7 +41,7 @@ def run_demo(garments: list[str] | None = None, z: int = 256, sigma: float = 0.1
     """Runs the demo and prints a table; returns one report per garment."""
     device = torch.device(device or ("cuda" if torch.cuda.is_available() else "cpu"))
     names = garments or shipped_garments()
-    model = FCAStack(6, 64, layers=3, alpha=alpha).to(device).eval()
+    model = FCAStack(6, 64, layers=3, heads=4, alpha=alpha).to(device).eval()
     reports, graphs, outputs = [], [], []
     for name in tqdm(names, desc="garments", unit="garment"):
         mesh = load_shipped_garment(name)

@@ -18,28 +18,25 @@ import numpy as np
 import torch
 
 from swingar_pyg.atomic import atomic_path
+from swingar_pyg.geometry import BodySurface, load_mesh
+from swingar_pyg.inference.scene import Scene, compile_scene
 from swingar_pyg.inference.streaming import SwinGarStream
-from swingar_pyg.models import GarmentWindow, SwinGarEstimator
-from swingar_pyg.models.garment_window import dense_skinning_weights, garment_graph_features
+from swingar_pyg.models import BodySDF, GarmentWindow, SwinGarEstimator
+from swingar_pyg.models.garment_window import garment_graph_features
+from swingar_pyg.viz.preview import render_sequence
+from swingar_pyg.world.body import AnnyBody
+from swingar_pyg.world.garment import garment_on_body
+from swingar_pyg.world.garment_assets import fit_shipped_garment, shipped_garments
+from swingar_pyg.world.motion_library import make_motion
 
 
 def garment_graph(garment, num_joints: int, descriptor_size: int | None,
                   sigma: float = 0.1, seed: int = 0) -> GarmentWindow:
-    """The estimator's garment inputs (``rest``, ``normal``, ``fit``,
-    ``prior_weights``, ``edge_index``, ``descriptor``) for a
-    :class:`~swingar_pyg.world.garment.Garment`, computed as the datamodule's
-    feature cache computes them."""
-    mesh = garment.mesh
-    features = garment_graph_features(mesh, descriptor_size, sigma, seed)
-    graph = GarmentWindow(
-        rest=torch.as_tensor(mesh.vertices, dtype=torch.float32), normal=features["normal"],
-        fit=torch.as_tensor(garment.fit, dtype=torch.float32),
-        prior_weights=dense_skinning_weights(garment.skin_indices, garment.skin_weights,
-                                             num_joints),
-        edge_index=features["edge_index"], num_nodes=mesh.num_vertices)
-    if "descriptor" in features:
-        graph.descriptor = features["descriptor"][None]
-    return graph
+    """The estimator's garment inputs (:meth:`GarmentWindow.from_garment`) for a
+    :class:`~swingar_pyg.world.garment.Garment`, its features computed as the
+    datamodule's feature cache computes them."""
+    features = garment_graph_features(garment.mesh, descriptor_size, sigma, seed)
+    return GarmentWindow.from_garment(garment, num_joints, features)
 
 
 def animate(estimator: SwinGarEstimator, graph: GarmentWindow, body_shape: torch.Tensor,
@@ -63,23 +60,7 @@ def animate(estimator: SwinGarEstimator, graph: GarmentWindow, body_shape: torch
     return torch.stack(out), np.asarray(seconds)
 
 
-def load_estimator(checkpoint: str | Path) -> tuple[SwinGarEstimator, dict]:
-    """The estimator of a ``swingar fit`` checkpoint (in eval mode), and the
-    hyperparameters of the datamodule it was trained with (descriptor settings)."""
-    from swingar_pyg.training import SwinGarModule
-
-    if not Path(checkpoint).is_file():
-        raise ValueError(f"no checkpoint at {checkpoint}")
-    saved = torch.load(checkpoint, map_location="cpu", weights_only=False)
-    module = SwinGarModule.load_from_checkpoint(checkpoint, map_location="cpu")
-    return module.estimator.eval(), saved.get("datamodule_hyper_parameters", {})
-
-
 def _load_garment(source: str, body, shape):
-    from swingar_pyg.geometry import load_mesh
-    from swingar_pyg.world.garment import garment_on_body
-    from swingar_pyg.world.garment_assets import fit_shipped_garment, shipped_garments
-
     if source in shipped_garments():
         return fit_shipped_garment(source, body, shape)
     if not Path(source).is_file():
@@ -100,8 +81,6 @@ def inside_counts(before: torch.Tensor, after: torch.Tensor, posed, body_faces: 
                   progress: bool = True) -> dict:
     """Garment vertices inside the posed body (exact SDF) before and after the
     collision pass, over all frames ``(T, N, 3)``."""
-    from swingar_pyg.geometry.signed_distance import BodySurface
-
     frames = range(len(before))
     if progress:
         from tqdm import tqdm
@@ -115,23 +94,21 @@ def inside_counts(before: torch.Tensor, after: torch.Tensor, posed, body_faces: 
     return counts
 
 
-def predict_to_folder(checkpoint: str, garment: str, motion: str, out: str | Path,
+def predict_to_folder(estimator: SwinGarEstimator, garment: str, motion: str, out: str | Path,
                       body_shape: list[float] | None = None, seconds: float | None = None,
-                      preview: bool = True, progress: bool = True,
-                      collisions: bool = True, body_sdf: str | None = None) -> dict:
+                      preview: bool = True, progress: bool = True, collisions: bool = True,
+                      body_sdf: BodySDF | None = None, data_settings: dict | None = None,
+                      checkpoint: str | None = None) -> dict:
     """Animates ``garment`` (a mesh file or a shipped garment name) on ``motion``
     (a procedural family, a shipped clip or a ``.bvh`` path) and writes to
     ``out``: ``frames/frame_0000.obj`` …, ``garment.npz`` (all frames, faces,
     body shape), ``preview.gif`` and ``summary.json`` (with what each stage of
     the :class:`~swingar_pyg.inference.scene.Scene` pipeline cost). With ``collisions``,
-    vertices inside the body are moved out: by the neural body SDF of the
-    checkpoint ``body_sdf`` if given, else by the exact one."""
-    from swingar_pyg.world.body import AnnyBody
-    from swingar_pyg.world.motion_library import make_motion
-
-    from swingar_pyg.inference.scene import Scene, compile_scene
-
-    estimator, data_settings = load_estimator(checkpoint)
+    vertices inside the body are moved out: by the neural ``body_sdf`` if given,
+    else by the exact SDF. ``data_settings``: the descriptor's ``sigma`` and ``seed``
+    the estimator was trained with; ``checkpoint``: where it came from, for the
+    summary."""
+    data_settings = data_settings or {}
     body = AnnyBody()
     shape = body.default_shape() if body_shape is None else torch.tensor(body_shape)
     fitted = _load_garment(garment, body, shape)
@@ -161,15 +138,13 @@ def predict_to_folder(checkpoint: str, garment: str, motion: str, out: str | Pat
             np.savez_compressed(handle, vertices=vertices, faces=faces,
                                 body_shape=shape.numpy(), fps=clip.fps)
     if preview:
-        from swingar_pyg.viz.preview import render_sequence
-
         render_sequence(out / "preview.gif", posed.vertices.numpy(), body.faces.numpy(),
                         vertices, faces, fps=clip.fps, title=f"{fitted.name} / {clip.name}")
     network = ("motion code", "skinning (E, P, LBS)", "detail (M_d)")
     summary = {"garment": fitted.name, "vertices": int(fitted.mesh.num_vertices),
                "motion": clip.name, "frames": int(len(vertices)),
                "estimator_ms_per_frame": 1e3 * sum(result.stage(n).seconds for n in network) /
-               len(vertices), "checkpoint": str(checkpoint), "collisions": collision_counts,
+               len(vertices), "checkpoint": checkpoint, "collisions": collision_counts,
                "stages": [dataclasses.asdict(stage) for stage in result.stages]}
     with atomic_path(out / "summary.json") as tmp:
         tmp.write_text(json.dumps(summary, indent=2))

@@ -33,8 +33,20 @@ from typing import Iterator
 import numpy as np
 import torch
 from torch import Tensor
+from torch_geometric.data import Batch
 
+from swingar_pyg.atomic import atomic_path
+from swingar_pyg.collision import (
+    BoneCapsules,
+    NeuralCollisions,
+    exact_signed_distance,
+    resolve_collisions,
+)
+from swingar_pyg.geometry import mesh_edge_index
+from swingar_pyg.geometry.skinning import linear_blend_skinning
 from swingar_pyg.inference.streaming import SwinGarStream
+from swingar_pyg.models import BodySDF, GarmentWindow
+from swingar_pyg.models.garment_window import garment_graph_features
 
 
 @dataclass
@@ -117,14 +129,10 @@ class GarmentFeatureCache:
     def compute(self, mesh, descriptor_size: int | None, sigma: float = 0.1,
                 seed: int = 0) -> dict:
         """Computes the features and caches them."""
-        from swingar_pyg.models.garment_window import garment_graph_features
-
         key = self.key(mesh, descriptor_size, sigma, seed)
         features = garment_graph_features(mesh, descriptor_size, sigma, seed)
         self._memory[key] = features
         if self.directory is not None:
-            from swingar_pyg.atomic import atomic_path
-
             with atomic_path(self.directory / f"{key}.pt") as tmp:
                 torch.save(features, tmp)
         return features
@@ -142,8 +150,8 @@ class Scene:
         motion: the :class:`~swingar_pyg.world.motion.Motion`.
         skinning_only: rigid skinning with the transferred weights, no network.
         collisions: move vertices out of the body after inference.
-        body_sdf: a body SDF checkpoint for the collision pass (default: the
-            exact mesh SDF, slower).
+        body_sdf: a trained :class:`~swingar_pyg.models.BodySDF` for the
+            collision pass (default: the exact mesh SDF, slower).
     """
 
     garments: list
@@ -152,7 +160,7 @@ class Scene:
     motion: object
     skinning_only: bool = False
     collisions: bool = True
-    body_sdf: str | None = None
+    body_sdf: BodySDF | None = None
 
     def __post_init__(self):
         if not self.garments:
@@ -198,6 +206,21 @@ STAGES = ("garment features", "batch", "body poses", "rigid skinning", "motion c
           "collisions: broad phase", "collisions: SDF + correction")
 
 
+@dataclass(frozen=True)
+class Stage:
+    """One stage of a scene's plan: whether it will run, and why it runs or why
+    it is left out."""
+
+    name: str
+    runs: bool
+    why: str
+
+    @property
+    def note(self) -> str:
+        """``why`` as a run reports it: ``"left out: …"`` for a stage left out."""
+        return self.why if self.runs else f"left out: {self.why}"
+
+
 class ScenePipeline:
     """The stages a scene needs (see the module docstring); :meth:`run` runs them."""
 
@@ -209,36 +232,36 @@ class ScenePipeline:
         self.cache = cache or GarmentFeatureCache()
         self.sigma, self.seed, self.margin = sigma, seed, collision_margin
 
-    def plan(self) -> list[tuple[str, str]]:
-        """``(stage, why it runs or is left out)`` before running."""
+    def plan(self) -> list[Stage]:
+        """Every stage in order, whether it will run and why, before running."""
         s = self.scene
-        network = "left out: skinning only" if s.skinning_only else "runs"
-        detail = (s.skinning_only and "left out: skinning only" or
-                  self.estimator.detail is None and "left out: the estimator has none" or
-                  "runs, but not on static frames")
-        sdf = "neural SDF" if s.body_sdf else "exact SDF"
+
+        def stage(name: str, left_out: str, runs: str = "runs") -> Stage:
+            """``left_out``: why the stage is left out, empty if it runs."""
+            return Stage(name, not left_out, left_out or runs)
+
+        skinning_only = "skinning only" if s.skinning_only else ""
+        switched_off = "" if s.collisions else "switched off"
+        no_detail = skinning_only or ("the estimator has none"
+                                      if self.estimator.detail is None else "")
+        sdf = "neural SDF" if s.body_sdf is not None else "exact SDF"
         return [
-            ("garment features", "left out: skinning only" if s.skinning_only else
-             "per garment, unless cached"),
-            ("batch", f"{len(s.garments)} garments in one Batch" if len(s.garments) > 1 else
-             "left out: one garment"),
-            ("body poses", "runs"),
-            ("rigid skinning", "runs" if s.skinning_only else "left out: the estimator skins"),
-            ("motion code", network), ("skinning (E, P, LBS)", network),
-            ("detail (M_d)", detail),
-            ("static frames reused", "left out: skinning only" if s.skinning_only else
-             "frames whose pose window did not change"),
-            ("collisions: broad phase", "runs" if s.collisions else "left out: switched off"),
-            ("collisions: SDF + correction", f"{sdf}, on frames the broad phase flags"
-             if s.collisions else "left out: switched off"),
+            stage("garment features", skinning_only, "per garment, unless cached"),
+            stage("batch", "one garment" if len(s.garments) == 1 else "",
+                  f"{len(s.garments)} garments in one Batch"),
+            stage("body poses", ""),
+            stage("rigid skinning", "" if s.skinning_only else "the estimator skins"),
+            stage("motion code", skinning_only),
+            stage("skinning (E, P, LBS)", skinning_only),
+            stage("detail (M_d)", no_detail, "runs, but not on static frames"),
+            stage("static frames reused", skinning_only,
+                  "frames whose pose window did not change"),
+            stage("collisions: broad phase", switched_off),
+            stage("collisions: SDF + correction", switched_off,
+                  f"{sdf}, on frames the broad phase flags"),
         ]
 
     def _graphs(self, timer: StageTimer):
-        from torch_geometric.data import Batch
-
-        from swingar_pyg.models import GarmentWindow
-        from swingar_pyg.models.garment_window import dense_skinning_weights
-
         graphs, cached = [], 0
         joints = len(self.scene.body.joint_names)
         settings = (self.estimator.descriptor_size, self.sigma, self.seed)
@@ -250,15 +273,7 @@ class ScenePipeline:
                     record(*[v for v in features.values() if isinstance(v, Tensor)])
             else:
                 cached += 1
-            graph = GarmentWindow(
-                rest=torch.as_tensor(garment.mesh.vertices, dtype=torch.float32),
-                normal=features["normal"], fit=torch.as_tensor(garment.fit, dtype=torch.float32),
-                prior_weights=dense_skinning_weights(garment.skin_indices, garment.skin_weights,
-                                                     joints),
-                edge_index=features["edge_index"], num_nodes=garment.mesh.num_vertices)
-            if "descriptor" in features:
-                graph.descriptor = features["descriptor"][None]
-            graphs.append(graph)
+            graphs.append(GarmentWindow.from_garment(garment, joints, features))
         timer.stage("garment features").note = (
             f"{len(graphs) - cached} computed, {cached} from the cache" if cached < len(graphs)
             else f"left out: all {cached} from the cache")
@@ -271,8 +286,6 @@ class ScenePipeline:
         return batch
 
     def run(self, progress: bool = False) -> SceneResult:
-        from swingar_pyg.geometry import mesh_edge_index
-
         s = self.scene
         timer = StageTimer()
         frames = s.motion.num_frames
@@ -288,9 +301,9 @@ class ScenePipeline:
             graph = self._graphs(timer)
             vertices = self._stream(graph, posed, timer, progress)
             edge_index = graph.edge_index
-        for name, reason in self.plan():
-            if reason.startswith("left out"):
-                timer.skip(name, reason)
+        for planned in self.plan():
+            if not planned.runs:
+                timer.skip(planned.name, planned.note)
         before = vertices
         if s.collisions:
             vertices = self._collide(vertices, edge_index, posed, timer)
@@ -303,8 +316,6 @@ class ScenePipeline:
                            frames)
 
     def _skin_rigidly(self, posed, timer: StageTimer) -> Tensor:
-        from swingar_pyg.geometry.skinning import linear_blend_skinning
-
         out = []
         with timer("rigid skinning") as record:
             for garment in self.scene.garments:
@@ -353,19 +364,12 @@ class ScenePipeline:
 
     def _collide(self, vertices: Tensor, edge_index: Tensor, posed,
                  timer: StageTimer) -> Tensor:
-        from swingar_pyg.collision import (
-            BoneCapsules,
-            NeuralCollisions,
-            exact_signed_distance,
-            resolve_collisions,
-        )
-
         s = self.scene
         capsules = BoneCapsules.from_body(s.body, s.body_shape)
         neural = None
         if s.body_sdf is not None:
-            neural = NeuralCollisions.from_checkpoint(s.body_sdf, s.body, s.body_shape,
-                                                      margin=self.margin)
+            neural = NeuralCollisions.for_body(s.body_sdf, s.body, s.body_shape,
+                                               margin=self.margin)
         out, moved = vertices.clone(), 0
         for t in range(len(vertices)):
             with timer("collisions: broad phase"):

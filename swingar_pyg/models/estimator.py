@@ -34,13 +34,13 @@ turns with the body.
 from __future__ import annotations
 
 from dataclasses import dataclass
+
 import torch
-import torch.nn.functional as F
 from torch import Tensor, nn
 from torch_geometric.utils import add_remaining_self_loops
 
 from swingar_pyg.models.pose_features import pose_feature_size
-from swingar_pyg.nn import FCALSTM, FCAConv, attention_edge_index
+from swingar_pyg.nn import FCALSTM, FCAStack, attention_edge_index
 
 TARGET_FRAMES = 3
 _PRIOR_FLOOR = 1e-6
@@ -53,23 +53,6 @@ class EstimatorOutput:
 
     vertices: Tensor
     skinned: Tensor
-
-
-class FCAStack(nn.Module):
-    """FCA layers, each followed by ELU; heads are averaged."""
-
-    def __init__(self, in_channels: int, channels: int, layers: int, heads: int,
-                 alpha: float, normalize: bool):
-        super().__init__()
-        sizes = [in_channels] + [channels] * layers
-        self.layers = nn.ModuleList(
-            FCAConv(a, b, heads=heads, concat=False, alpha=alpha, normalize=normalize,
-                    add_self_loops=False) for a, b in zip(sizes[:-1], sizes[1:]))
-
-    def forward(self, x: Tensor, edge_index: Tensor) -> Tensor:
-        for layer in self.layers:
-            x = F.elu(layer(x, edge_index))
-        return x
 
 
 def _mlp(in_channels: int, channels: int) -> nn.Sequential:
@@ -136,7 +119,7 @@ class SwinGarEstimator(nn.Module):
         self.history = history
         self.skinning_prior = skinning_prior
         pose_size = pose_feature_size(num_joints)
-        stack = dict(heads=heads, alpha=alpha, normalize=normalize)
+        stack = dict(heads=heads, alpha=alpha, normalize=normalize, add_self_loops=False)
         self.garment_encoder = FCAStack(7, channels, garment_layers, **stack)
         self.shape_parser = (_mlp(descriptor_size, channels)
                              if descriptor_size is not None else None)

@@ -10,6 +10,8 @@ import torch
 from torch import Tensor
 from torch_geometric.data import Data
 
+from swingar_pyg.geometry import mesh_edge_index, spectral_descriptor, vertex_normals
+
 # Graph-level tensors carry a leading dimension of 1 per garment, so that a
 # Batch concatenates them into one row per garment.
 GRAPH_LEVEL = ("descriptor", "body_shape", "pose_history", "history_mask",
@@ -43,6 +45,23 @@ class GarmentWindow(Data):
       rest-pose samples of the body surface, posed with the same transforms.
     """
 
+    @classmethod
+    def from_garment(cls, garment, num_joints: int, features: dict[str, Any]) -> GarmentWindow:
+        """The garment fields (``rest``, ``normal``, ``fit``, ``prior_weights``,
+        ``edge_index`` and, if computed, ``descriptor``) of a fitted garment (a
+        :class:`~swingar_pyg.world.garment.Garment`: ``mesh``, ``fit``,
+        ``skin_indices``, ``skin_weights``) and its :func:`garment_graph_features`."""
+        mesh = garment.mesh
+        window = cls(
+            rest=torch.as_tensor(mesh.vertices, dtype=torch.float32), normal=features["normal"],
+            fit=torch.as_tensor(garment.fit, dtype=torch.float32),
+            prior_weights=dense_skinning_weights(garment.skin_indices, garment.skin_weights,
+                                                 num_joints),
+            edge_index=features["edge_index"], num_nodes=mesh.num_vertices)
+        if "descriptor" in features:
+            window.descriptor = features["descriptor"][None]
+        return window
+
     def __cat_dim__(self, key: str, value: Any, *args, **kwargs) -> Any:
         if key in GRAPH_LEVEL:
             return 0
@@ -64,8 +83,6 @@ def garment_graph_features(mesh, descriptor_size: int | None, sigma: float = 0.1
     ``descriptor_size`` is ``None``, the ``descriptor`` (eigenvalues of ``A / N``,
     :func:`~swingar_pyg.geometry.spectral_descriptor` with ``normalize=True``)
     with its ``num_valid`` entries."""
-    from swingar_pyg.geometry import mesh_edge_index, spectral_descriptor, vertex_normals
-
     features: dict[str, Any] = {
         "edge_index": mesh_edge_index(mesh),
         "normal": vertex_normals(torch.as_tensor(mesh.vertices),

@@ -27,11 +27,15 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import torch
 
 from swingar_pyg.atomic import atomic_path
 from swingar_pyg.sim.recording import STRETCH_BAR, sequence_stretch_by_place
 from swingar_pyg.sim.xpbd import SIMULATOR_REVISION, XPBDSettings
-from swingar_pyg.world.garment import garment_spec
+from swingar_pyg.world.body import AnnyBody
+from swingar_pyg.world.catalogue import fit_garment, garment_spec
+from swingar_pyg.world.motion_library import make_motion
+from swingar_pyg.world.sequence import simulate_sequence
 from swingar_pyg.world.sequence_file import merge_sequence_files, write_sequences
 
 SPLITS = ("train", "val", "test")
@@ -160,13 +164,6 @@ def _with_solver_defaults(recipe: str) -> dict:
 
 def _run_job(job: Job, fps: float, seconds: float, solver: XPBDSettings, part: str,
              recipe: str) -> dict:
-    import torch
-
-    from swingar_pyg.world.body import AnnyBody
-    from swingar_pyg.world.garment import fit_garment
-    from swingar_pyg.world.motion_library import make_motion
-    from swingar_pyg.world.sequence import simulate_sequence
-
     torch.set_num_threads(1)
     body = AnnyBody()
     shape = torch.tensor(job.shape)

@@ -9,6 +9,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from swingar_pyg.geometry.signed_distance import inside_share
 from swingar_pyg.geometry.skinning import linear_blend_skinning
 from swingar_pyg.sim import BodyCollider, SimulationResult, XPBDCloth, XPBDSettings
 from swingar_pyg.sim.vbd import VBDCloth, VBDSettings
@@ -43,8 +44,6 @@ class SimulatedSequence:
     def with_exact_penetration(self, faces: Tensor) -> "SimulatedSequence":
         """This sequence with :attr:`penetration_exact` measured against the body of
         triangles ``faces`` (about 30 ms a frame for a 14k-vertex body)."""
-        from swingar_pyg.geometry.signed_distance import inside_share
-
         free = np.setdiff1d(np.arange(self.garment.mesh.num_vertices), self.garment.pinned)
         share = inside_share(self.body_vertices.numpy(), faces.numpy(),
                              self.result.positions.numpy()[:, free])
