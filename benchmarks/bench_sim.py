@@ -45,9 +45,9 @@ from common import (  # noqa: E402
 
 from swingar_pyg.sim import SIMULATOR_REVISION, STRETCH_BAR, XPBDSettings  # noqa: E402
 from swingar_pyg.world.body import AnnyBody  # noqa: E402
-from swingar_pyg.world.skirt import SkirtSpec, fit_procedural_skirt  # noqa: E402
 from swingar_pyg.world.motion import procedural_motion  # noqa: E402
 from swingar_pyg.world.sequence import simulate_sequence  # noqa: E402
+from swingar_pyg.world.skirt import SkirtSpec, fit_procedural_skirt  # noqa: E402
 
 REFERENCE: Setting = (400, 2, None, None)
 # one sweep at growing substeps, the library default (50x2), and the datasets' settings:
@@ -64,7 +64,6 @@ def plot(rows: list[dict], reference: str):
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
     from matplotlib.ticker import NullFormatter, ScalarFormatter
 
     figure, (error_axis, strain_axis) = plt.subplots(1, 2, figsize=(11, 4))

@@ -37,9 +37,9 @@ from common import machine_info, write_results  # noqa: E402
 
 from swingar_pyg.sim import VBDSettings, XPBDSettings  # noqa: E402
 from swingar_pyg.world.body import AnnyBody  # noqa: E402
-from swingar_pyg.world.skirt import SkirtSpec, fit_procedural_skirt  # noqa: E402
 from swingar_pyg.world.motion import procedural_motion  # noqa: E402
 from swingar_pyg.world.sequence import simulate_sequence  # noqa: E402
+from swingar_pyg.world.skirt import SkirtSpec, fit_procedural_skirt  # noqa: E402
 
 STIFF_BENDING = 10.0
 

@@ -69,9 +69,9 @@ from swingar_pyg.sim.recording import (  # noqa: E402
     stretch_by_place,
 )
 from swingar_pyg.world.body import AnnyBody  # noqa: E402
-from swingar_pyg.world.skirt import SkirtSpec, fit_procedural_skirt  # noqa: E402
 from swingar_pyg.world.motion import procedural_motion  # noqa: E402
 from swingar_pyg.world.sequence import simulate_sequence  # noqa: E402
+from swingar_pyg.world.skirt import SkirtSpec, fit_procedural_skirt  # noqa: E402
 
 MOTIONS = [("sway", 1.0), ("twist", 1.0), ("spin_stop", 1.0), ("walk", 1.0), ("jump", 1.0),
            ("kick", 0.7), ("kick", 1.0)]

@@ -22,8 +22,14 @@ from multiprocessing import get_context
 from pathlib import Path
 
 import numpy as np
+import torch
 
 from swingar_pyg.atomic import atomic_path
+from swingar_pyg.geometry import body_signed_distance
+from swingar_pyg.world.body import AnnyBody
+from swingar_pyg.world.dataset import DatasetConfig, make_dataset
+from swingar_pyg.world.motion import EXTREME_MOTIONS, PROCEDURAL_MOTIONS
+from swingar_pyg.world.motion_library import make_motion
 
 FIELDS = ("points", "sdf", "normal", "joint_transforms", "joint_positions", "body_shape")
 
@@ -110,10 +116,6 @@ def near_surface_points(vertices: np.ndarray, faces: np.ndarray, count: int,
 
 def _frames(body, shape, rotations, translation, chosen, count, settings, rng, extra=None):
     """Samples and exact targets of ``chosen`` frames of a pose sequence."""
-    import torch
-
-    from swingar_pyg.geometry import body_signed_distance
-
     posed = body.pose(torch.as_tensor(shape, dtype=torch.float32), rotations[chosen],
                       translation[chosen])
     faces = body.faces.numpy()
@@ -141,11 +143,6 @@ def sample_motion_frames(body, shape: tuple[float, ...], motions: tuple[str, ...
     """Samples of ``settings.frames_per_motion`` random frames of each motion
     source on ``body`` with ``shape``: arrays of :data:`FIELDS` and the motion
     name of each frame."""
-    import torch
-
-    from swingar_pyg.world.motion import EXTREME_MOTIONS, PROCEDURAL_MOTIONS
-    from swingar_pyg.world.motion_library import make_motion
-
     pieces, names = [], []
     for source in motions:
         amplitude = float(rng.uniform(*settings.amplitudes)) \
@@ -169,10 +166,6 @@ def _join(pieces: list[dict]) -> dict:
 
 def _run_job(job: _Job, settings: SDFSampleSettings) -> tuple[dict, list[str]]:
     import h5py
-    import torch
-
-    from swingar_pyg.world.body import AnnyBody
-
     torch.set_num_threads(1)
     body = AnnyBody()
     rng = np.random.default_rng(job.seed)
@@ -225,8 +218,6 @@ def _shape_key(shape: tuple[float, ...]) -> tuple[float, ...]:
 def _assign_garment_frames(jobs: list[_Job], settings: SDFSampleSettings,
                            rng: np.random.Generator) -> None:
     import h5py
-
-    from swingar_pyg.world.dataset import DatasetConfig, make_dataset
 
     # Shapes stored in float32 match the config's by value, not bit for bit.
     by_shape = {_shape_key(job.shape): job for job in jobs}

@@ -28,6 +28,10 @@ import numpy as np
 import torch
 
 from swingar_pyg.atomic import atomic_path
+from swingar_pyg.geometry import as_mesh, vertex_normals
+from swingar_pyg.geometry.spectral import DESCRIPTOR_SIGMA
+from swingar_pyg.models.garment_window import garment_graph_features
+from swingar_pyg.world.body import AnnyBody
 
 
 @dataclass(frozen=True)
@@ -43,7 +47,7 @@ class FeatureSettings:
     """
 
     descriptor_size: int | None = 256
-    sigma: float = 0.1
+    sigma: float = DESCRIPTOR_SIGMA
     weighting: str = "voronoi"
     seed: int = 0
     body_points: int = 1024
@@ -100,8 +104,6 @@ def ensure_feature_cache(path: str | Path, settings: FeatureSettings, body_model
     if cached_settings(path) == settings:
         return False
     if body_model is None:
-        from swingar_pyg.world.body import AnnyBody
-
         body_model = AnnyBody()
     with atomic_path(path) as tmp:
         shutil.copyfile(path, tmp)
@@ -124,9 +126,6 @@ def _bar(items, description: str, progress: bool):
 
 
 def _cache_garments(file, cache, settings: FeatureSettings, progress: bool) -> None:
-    from swingar_pyg.geometry import as_mesh
-    from swingar_pyg.models.garment_window import garment_graph_features
-
     for name in _bar(list(file["garments"]), "garment features", progress):
         source = file[f"garments/{name}"]
         mesh = as_mesh(source["rest_vertices"][:].astype(np.float64), source["faces"][:])
@@ -142,8 +141,6 @@ def _cache_garments(file, cache, settings: FeatureSettings, progress: bool) -> N
 
 def _cache_sequences(file, cache, settings: FeatureSettings, body_model,
                      progress: bool) -> None:
-    from swingar_pyg.geometry import vertex_normals
-
     indices, weights = body_model.skinning()
     faces = body_model.faces
     bodies: dict[tuple, tuple] = {}

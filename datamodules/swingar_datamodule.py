@@ -13,6 +13,10 @@ from torch_geometric.loader import DataLoader as GraphLoader
 from datamodules.feature_cache import FeatureSettings, ensure_feature_cache
 from datamodules.garment_windows import GarmentWindowDataset
 from datamodules.resumable_loader import ResumableGraphLoader
+from swingar_pyg.geometry.spectral import DESCRIPTOR_SIGMA
+from swingar_pyg.sim import SIMULATOR_REVISION
+from swingar_pyg.world.dataset import DatasetConfig, make_dataset
+from swingar_pyg.world.sequence_file import simulator_revisions
 
 SPLITS = ("train", "val", "test")
 
@@ -46,7 +50,8 @@ class SwinGarDataModule(L.LightningDataModule):
 
     def __init__(self, config: str = "configs/data/quickstart.yaml", root: str | None = None,
                  generate: bool = True, generation_workers: int = 2,
-                 descriptor_size: int | None = 256, sigma: float = 0.1, history: int = 64,
+                 descriptor_size: int | None = 256, sigma: float = DESCRIPTOR_SIGMA,
+                 history: int = 64,
                  body_points: int = 1024, batch_size: int = 4, train_stride: int = 1,
                  eval_stride: int = 1, num_workers: int = 0, pin_memory: bool = False,
                  persistent_workers: bool = False, seed: int = 0):
@@ -60,8 +65,6 @@ class SwinGarDataModule(L.LightningDataModule):
     def root(self) -> Path:
         if self.hparams.root is not None:
             return Path(self.hparams.root)
-        from swingar_pyg.world.dataset import DatasetConfig
-
         return Path(DatasetConfig.from_yaml(self.hparams.config).output)
 
     def split_path(self, split: str) -> Path:
@@ -74,8 +77,6 @@ class SwinGarDataModule(L.LightningDataModule):
                 raise ValueError(f"{', '.join(str(self.split_path(s)) for s in missing)} "
                                  "missing and generate=False; run `swingar make-dataset -c "
                                  f"{self.hparams.config}`")
-            from swingar_pyg.world.dataset import DatasetConfig, make_dataset
-
             make_dataset(DatasetConfig.from_yaml(self.hparams.config), self.root,
                          workers=self.hparams.generation_workers)
         _warn_if_stale(self.split_path(s) for s in SPLITS)
@@ -116,9 +117,6 @@ class SwinGarDataModule(L.LightningDataModule):
 
 
 def _warn_if_stale(paths) -> None:
-    from swingar_pyg.sim import SIMULATOR_REVISION
-    from swingar_pyg.world.sequence_file import simulator_revisions
-
     for path in paths:
         older = sorted(r for r in simulator_revisions(path) if r != SIMULATOR_REVISION)
         if older:

@@ -1,44 +1,49 @@
-"""The ``swingar`` command line. Each subcommand imports what it needs when it runs."""
+"""The ``swingar`` command line.
+
+``fit``, ``validate``, ``test``, ``predict --ckpt`` and ``report`` import the
+training layer (Lightning and jsonargparse, the ``train`` extra) when they run,
+so the other subcommands work without it.
+"""
 
 from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
+
+import numpy as np
+import torch
 
 from swingar_pyg import __version__
+from swingar_pyg.geometry.spectral import DESCRIPTOR_SIGMA
+from swingar_pyg.inference.demo import run_demo
+from swingar_pyg.inference.prediction import predict_to_folder
+from swingar_pyg.inference.scene import StageCost, stage_table
+from swingar_pyg.sim import STRETCH_BAR, VBDSettings, XPBDSettings
+from swingar_pyg.viz.preview import render_sequence
+from swingar_pyg.world.body import AnnyBody
+from swingar_pyg.world.catalogue import fit_garment, garment_spec
+from swingar_pyg.world.dataset import DatasetConfig, make_dataset
+from swingar_pyg.world.garment_assets import fit_shipped_garment
+from swingar_pyg.world.motion_library import make_motion
+from swingar_pyg.world.sequence import simulate_sequence
+from swingar_pyg.world.sequence_file import read_sequence, write_sequences
 
 # Subcommands handed to Lightning's CLI (swingar_pyg.training.cli), imported only then.
 LIGHTNING_COMMANDS = ("fit", "validate", "test", "predict")
 
 
 def _demo(args: argparse.Namespace) -> int:
-    from swingar_pyg.inference.demo import run_demo
-
     run_demo(args.garment or None, z=args.z, sigma=args.sigma, alpha=args.alpha,
              device=args.device)
     return 0
 
 
 def _simulate(args: argparse.Namespace) -> int:
-    from pathlib import Path
-
-    import numpy as np
-    import torch
-
-    from swingar_pyg.sim import VBDSettings, XPBDSettings
-    from swingar_pyg.viz.preview import render_sequence
-    from swingar_pyg.world.body import AnnyBody
-    from swingar_pyg.world.catalogue import fit_garment, garment_spec
-    from swingar_pyg.world.motion_library import make_motion
-    from swingar_pyg.world.sequence import simulate_sequence
-    from swingar_pyg.world.sequence_file import write_sequences
-
     torch.set_num_threads(1)
     body = AnnyBody()
     shape = torch.tensor(args.body_shape) if args.body_shape else body.default_shape()
     if args.garment:
-        from swingar_pyg.world.garment_assets import fit_shipped_garment
-
         garment = fit_shipped_garment(args.garment, body, shape)
     else:
         entry = {"kind": args.kind, "vertices": args.vertices, "jitter": args.jitter}
@@ -91,9 +96,6 @@ def _simulate(args: argparse.Namespace) -> int:
 
 
 def _make_dataset(args: argparse.Namespace) -> int:
-    from swingar_pyg.sim import STRETCH_BAR
-    from swingar_pyg.world.dataset import DatasetConfig, make_dataset
-
     config = DatasetConfig.from_yaml(args.config)
     try:
         index, count = (int(v) for v in args.shard.split("/"))
@@ -125,12 +127,6 @@ def _make_dataset(args: argparse.Namespace) -> int:
 
 
 def _preview(args: argparse.Namespace) -> int:
-    import torch
-
-    from swingar_pyg.viz.preview import render_sequence
-    from swingar_pyg.world.body import AnnyBody
-    from swingar_pyg.world.sequence_file import read_sequence
-
     sequence = read_sequence(args.file, args.sequence)
     body = AnnyBody()
     if sequence["joint_names"] != body.joint_names:
@@ -161,7 +157,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--garment", action="append", metavar="NAME",
                       help="a shipped garment (repeatable; default: all)")
     demo.add_argument("--z", type=int, default=256, help="descriptor length (default: 256)")
-    demo.add_argument("--sigma", type=float, default=0.1,
+    demo.add_argument("--sigma", type=float, default=DESCRIPTOR_SIGMA,
                       help="descriptor kernel width in metres (default: 0.1)")
     demo.add_argument("--alpha", type=float, default=2.0, help="FCAConv alpha (default: 2.0)")
     demo.add_argument("--device", default=None, help="torch device (default: cuda if available)")
@@ -200,8 +196,8 @@ def build_parser() -> argparse.ArgumentParser:
                                "'swingar-pyg[newton]')")
     simulate.add_argument("--bending", choices=("distance", "dihedral"), default=None,
                           help="XPBD bending model (default: dihedral, the datasets': hinge "
-                               "angles at VBD's stiffness; distance: simulator revision 3's "
-                               "opposite-corner constraints)")
+                               "angles at VBD's stiffness; distance: constraints between the "
+                               "opposite corners of adjacent triangles)")
     simulate.add_argument("--substeps", type=int, default=None,
                           help="per frame (default: the solver's, XPBD 50, VBD 10; the "
                                "quickstart data use XPBD 100 x 1, up to 400 on frames above "
@@ -280,7 +276,6 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _predict(args: argparse.Namespace) -> int:
-    from swingar_pyg.inference.prediction import predict_to_folder
     from swingar_pyg.training import load_body_sdf, load_estimator
 
     estimator, data_settings = load_estimator(args.ckpt)
@@ -289,8 +284,6 @@ def _predict(args: argparse.Namespace) -> int:
                                 args.body_shape, args.seconds, args.preview,
                                 collisions=args.collisions, body_sdf=body_sdf,
                                 data_settings=data_settings, checkpoint=args.ckpt)
-    from swingar_pyg.inference.scene import StageCost, stage_table
-
     print(stage_table([StageCost(**stage) for stage in summary["stages"]]))
     print(f"{summary['garment']} ({summary['vertices']} vertices) on {summary['motion']}: "
           f"{summary['frames']} frames, estimator {summary['estimator_ms_per_frame']:.1f} "

@@ -18,10 +18,12 @@ import pytest
 REQUIRED_IN_CI = {
     'anny': 'body',
     'h5py': 'data (in dev)',
+    'importlinter': 'dev',
     'lightning': 'train (in dev)',
     'matplotlib': 'viz (in dev)',
     'nbclient': 'dev (through nbmake)',
     'nbformat': 'dev (through nbmake)',
+    'ruff': 'dev',
     'newton': 'newton',
     'smplx': 'smpl (in dev)',
     'trimesh': 'data (in dev)',

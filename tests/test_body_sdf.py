@@ -271,6 +271,7 @@ def test_broad_phase_skips_the_network_for_a_garment_far_from_the_body(trained_c
 def test_cli_trains_the_body_sdf_from_its_config(tiny_windows, tiny_body_sdf, tmp_path):
     import csv
     import os
+    import shutil
 
     import h5py
     import yaml
@@ -280,8 +281,6 @@ def test_cli_trains_the_body_sdf_from_its_config(tiny_windows, tiny_body_sdf, tm
     from swingar_pyg.geometry import body_signed_distance
     from swingar_pyg.training import BodySDFModule
     from swingar_pyg.world.body import AnnyBody
-
-    import shutil
 
     root = tiny_body_sdf.parents[1]
     config = root / 'tiny_sdf.yaml'

@@ -165,7 +165,8 @@ def test_retargeted_limbs_point_where_the_capture_points_them(anny_body, clip):
                        ('LowerBack', 'Spine'), ('Neck', 'Head')]:
         ours = body[:, names.index(tail)] - body[:, names.index(head)]
         theirs = joints[:, clip_names.index(tail)] - joints[:, clip_names.index(head)]
-        cosine = (ours * theirs).sum(1) / np.linalg.norm(ours, axis=1) / np.linalg.norm(theirs, axis=1)
+        norms = np.linalg.norm(ours, axis=1) * np.linalg.norm(theirs, axis=1)
+        cosine = (ours * theirs).sum(1) / norms
         assert cosine.min() > 0.999, (head, tail)
     # Forward along -Y at a human pace, the pelvis at the body's own height.
     seconds = motion.num_frames / motion.fps

@@ -18,7 +18,9 @@ solver: {{substeps: 8, iterations: 2, settle_frames: 1}}
 body_shapes: [[0.5, 0.5, 0.5, 0.5, 0.5, 0.5]]
 splits:
   train:
-    garments: [{{length: 0.4, flare: 0.3, vertices: 120}}, {{length: 0.5, vertices: 150, jitter: 0.3}}]
+    garments:
+      - {{length: 0.4, flare: 0.3, vertices: 120}}
+      - {{length: 0.5, vertices: 150, jitter: 0.3}}
     motions: [{{kind: sway}}]
   test:
     garments: [{{length: 0.6, flare: 0.4, vertices: 130}}]

@@ -15,7 +15,7 @@ EDGE_INDEX = torch.tensor([[0, 1, 2, 3, 0, 2, 4, 5, 1], [1, 2, 3, 0, 2, 0, 5, 4,
 
 
 def reference_scores(conv: FCAConv, x: torch.Tensor, edge_index: torch.Tensor) -> torch.Tensor:
-    """e*_ij straight from the formula in DESIGN §2, with loops over nodes (float64)."""
+    """e*_ij straight from the formula in docs/design.md §2, with loops over nodes (float64)."""
     heads, channels = conv.heads, conv.out_channels
     h = (x.double() @ conv.lin.weight.double().t()).view(-1, heads, channels)
     a_src = conv.att_src.double()[0]

@@ -3,7 +3,7 @@ import torch
 from torch_geometric.data import Batch
 from torch_geometric.utils import add_self_loops
 
-from swingar_pyg.nn import FCAConv, FCALSTM
+from swingar_pyg.nn import FCALSTM, FCAConv
 from tests.graphs import sheet_graph
 
 

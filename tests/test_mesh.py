@@ -127,7 +127,8 @@ def test_duplicate_vertices_are_welded_and_components_stay_apart():
     # Right sheet shares its left column with the left sheet's right column (a seam),
     # plus a third piece far away.
     far = sheet(3, 3)
-    vertices = np.concatenate([left.vertices, right.vertices + [1, 0, 0], far.vertices + [10, 0, 0]])
+    vertices = np.concatenate([left.vertices, right.vertices + [1, 0, 0],
+                               far.vertices + [10, 0, 0]])
     faces = np.concatenate([left.faces, right.faces + 9, far.faces + 18])
     mesh = as_mesh(vertices, faces)
     distances = geodesic_distances(edge_length_graph(mesh), 0)[0]

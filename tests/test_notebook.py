@@ -1,6 +1,5 @@
 """notebooks/explore.ipynb runs top to bottom (small settings)."""
 
-import os
 from pathlib import Path
 
 from tests.extras import require

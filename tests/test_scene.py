@@ -3,8 +3,8 @@ import dataclasses
 import pytest
 import torch
 
-from swingar_pyg.models import SwinGarEstimator
 from swingar_pyg.inference.scene import GarmentFeatureCache, Scene, compile_scene
+from swingar_pyg.models import SwinGarEstimator
 from tests.extras import require
 from tests.windows import SMALL_ESTIMATOR
 

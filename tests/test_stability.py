@@ -2,8 +2,15 @@ import math
 
 import pytest
 
-from swingar_pyg.eval.stability import (SMALL, Case, available_cases, run_case, run_stability,
-                                        stability_summary, stability_table)
+from swingar_pyg.eval.stability import (
+    SMALL,
+    Case,
+    available_cases,
+    run_case,
+    run_stability,
+    stability_summary,
+    stability_table,
+)
 from tests.extras import require
 
 require('anny')

@@ -72,12 +72,12 @@ def test_hm08_vertices_are_read_from_the_obj_in_anny_order(tmp_path):
 
 
 def test_shipped_hm08_body_is_the_body_the_shipped_garments_were_fitted_on(anny_body):
-    """The shipped hm08 vertices are in anny's order, and on anny's triangles they are
-    the surface every shipped garment was made for: each garment sits about a centimetre outside it (median
-    3.9-14 mm measured), hardly any vertex more than 5 mm inside (at most 3 %, the
-    tight tops) and none far off (at most 12 cm, the knee skirt's hem). A file in
-    another order, unit or frame, or anny's own rest body (its origin is 9 cm from
-    hm08's) puts the garments centimetres to metres off."""
+    """The shipped hm08 vertices are in anny's order, and on anny's triangles they are the
+    surface every shipped garment was made for: each garment sits about a centimetre outside
+    it (median 3.9-14 mm measured), hardly any vertex more than 5 mm inside (at most 3 %,
+    the tight tops) and none far off (at most 12 cm, the knee skirt's hem). A file in
+    another order, unit or frame, or anny's own rest body (its origin is 9 cm from hm08's)
+    puts the garments centimetres to metres off."""
     from swingar_pyg.geometry import body_signed_distance
     from swingar_pyg.world.garment_assets import (
         _hm08_body,

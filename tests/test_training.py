@@ -208,11 +208,24 @@ def test_configs_parse_and_ablations_change_only_their_knob(layers, expected, ca
         build_cli([*args, '--print_config'])
     config = yaml.safe_load(capsys.readouterr().out)
     assert config['model']['class_path'] == 'swingar_pyg.training.SwinGarModule'
+    data = config['data']['init_args']
     estimator = config['model']['init_args']['estimator']['init_args']
-    assert {k: estimator[k] for k in expected} == expected
-    assert config['data']['init_args']['descriptor_size'] == estimator['descriptor_size']
+    # set once, under data:, and linked into the estimator (so not printed there)
+    assert 'descriptor_size' not in estimator and 'history' not in estimator
+    linked = {**estimator, 'descriptor_size': data['descriptor_size'], 'history': data['history']}
+    assert {k: linked[k] for k in expected} == expected
     if len(layers) > 1:
         assert config['trainer']['default_root_dir'].startswith('runs/ablations/')
+
+
+@pytest.mark.parametrize('ablation,size', [('z128', 128), ('no_descriptor', None)])
+def test_the_estimator_takes_descriptor_size_and_history_from_the_data(ablation, size):
+    from swingar_pyg.training.cli import build_cli
+
+    cli = build_cli(['-c', 'configs/quickstart.yaml', '-c', f'configs/ablations/{ablation}.yaml',
+                     '--data.generate', 'false', '--data.history', '12'], run=False)
+    assert cli.model.estimator.descriptor_size == size == cli.datamodule.hparams.descriptor_size
+    assert cli.model.estimator.history == 12
 
 
 def test_the_body_sdf_config_parses_with_its_own_module(capsys):

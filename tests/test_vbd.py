@@ -7,9 +7,9 @@ import trimesh
 
 from swingar_pyg.geometry import as_mesh, sheet
 from swingar_pyg.sim import BodyCollider, VBDCloth, VBDSettings, XPBDCloth, XPBDSettings
+from tests.extras import require
 
 from .test_xpbd import hanging_sheet
-from tests.extras import require
 
 require('newton')
 

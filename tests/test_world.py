@@ -5,12 +5,17 @@ import pytest
 import torch
 
 from swingar_pyg.geometry import closest_face_signed_distance, split_quads, vertex_normals
-from swingar_pyg.geometry.skinning import linear_blend_skinning
 from swingar_pyg.geometry.mesh import as_mesh
+from swingar_pyg.geometry.skinning import linear_blend_skinning
 from swingar_pyg.world.garment import pin_bands
-from swingar_pyg.world.skirt import (DressSpec, SkirtSpec, body_envelope, fit_procedural_skirt,
-                                     procedural_skirt)
 from swingar_pyg.world.motion import EXTREME_MOTIONS, PROCEDURAL_MOTIONS, procedural_motion
+from swingar_pyg.world.skirt import (
+    DressSpec,
+    SkirtSpec,
+    body_envelope,
+    fit_procedural_skirt,
+    procedural_skirt,
+)
 from tests.extras import require
 
 CMU_JOINTS = ('Hips', 'LHipJoint', 'LeftUpLeg', 'LeftLeg', 'LeftFoot', 'LowerBack', 'Spine',

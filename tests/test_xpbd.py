@@ -69,7 +69,7 @@ def test_compliance_orders_stretch():
     (XPBDSettings(substeps=50, iterations=4, stretch_compliance=0.0, bending="distance",
                   bend_compliance=0.0, settle_frames=0), 0.02),  # infinitely stiff
     (XPBDSettings(substeps=10, density=100.0, settle_frames=0), 0.1),  # very heavy cloth
-    # 4x the frame time with 5 substeps: coarse, so it stretches (DESIGN §8 measured
+    # 4x the frame time with 5 substeps: coarse, so it stretches (docs/design.md §8 measured
     # 12-30 % for such settings), but stays finite and bounded.
     (XPBDSettings(fps=7.5, substeps=5, settle_frames=0), 0.35),
     (XPBDSettings(fps=7.5, substeps=5, bending="distance", settle_frames=0), 0.35),

@@ -1,4 +1,4 @@
-r"""Post-inference collision handling (paper §3.4, DESIGN §5): garment vertices
+r"""Post-inference collision handling (paper §3.4, docs/design.md §5): garment vertices
 inside the body move out, each by its own depth plus the offset its
 non-colliding neighbours keep, so the corrected patch follows its surroundings
 instead of bulging.

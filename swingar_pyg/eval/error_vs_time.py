@@ -20,7 +20,18 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from swingar_pyg.collision import exact_signed_distance, resolve_collisions
+from swingar_pyg.geometry import mesh_edge_index
+from swingar_pyg.geometry.signed_distance import BodySurface
+from swingar_pyg.geometry.skinning import linear_blend_skinning
+from swingar_pyg.geometry.spectral import DESCRIPTOR_SIGMA
 from swingar_pyg.inference import SwinGarStream
+from swingar_pyg.inference.prediction import garment_graph
+from swingar_pyg.sim import VBDSettings, XPBDSettings
+from swingar_pyg.training.vertex_errors import error_stats
+from swingar_pyg.world.motion import Motion
+from swingar_pyg.world.sequence import simulate_sequence
+from swingar_pyg.world.sequence_file import read_garment, read_sequence
 
 
 @dataclass
@@ -42,9 +53,6 @@ def load_test_sequences(path, body, limit: int | None = None,
     """The sequences of a split file (all, the first ``limit`` or ``ids``),
     with the body posed for each."""
     import h5py
-
-    from swingar_pyg.world.motion import Motion
-    from swingar_pyg.world.sequence_file import read_garment, read_sequence
 
     if ids is None:
         with h5py.File(path, "r") as file:
@@ -82,8 +90,6 @@ class MethodResult:
 
     def stats(self, sequences: list[TestSequence] | None = None) -> dict[str, float]:
         """Mean, RMSE and p95 (mm) over all errors (of ``sequences`` if given)."""
-        from swingar_pyg.training.vertex_errors import error_stats
-
         keep = None if sequences is None else {s.id for s in sequences}
         chosen = [e.reshape(-1) for k, e in self.errors.items() if keep is None or k in keep]
         return error_stats(torch.cat(chosen))
@@ -99,8 +105,6 @@ def _distance_mm(a: Tensor, b: Tensor) -> Tensor:
 
 def evaluate_rigid(sequences: list[TestSequence]) -> MethodResult:
     """Rigid skinning with the weights transferred from the body (the baseline)."""
-    from swingar_pyg.geometry.skinning import linear_blend_skinning
-
     errors, seconds = {}, []
     for s in sequences:
         rest = torch.as_tensor(s.garment.mesh.vertices, dtype=torch.float32)
@@ -117,7 +121,7 @@ def evaluate_rigid(sequences: list[TestSequence]) -> MethodResult:
 
 
 def evaluate_estimator(name: str, estimator, sequences: list[TestSequence],
-                       sigma: float = 0.1, seed: int = 0, precision: str = "fp32",
+                       sigma: float = DESCRIPTOR_SIGMA, seed: int = 0, precision: str = "fp32",
                        collisions=None, body=None) -> MethodResult:
     """The estimator streamed over each sequence, one frame at a time.
 
@@ -128,11 +132,6 @@ def evaluate_estimator(name: str, estimator, sequences: list[TestSequence],
             ``shape -> handler``; its time is included, and the share of
             vertices inside the body after it (exact SDF) is recorded.
     """
-    from swingar_pyg.collision import exact_signed_distance, resolve_collisions
-    from swingar_pyg.geometry.signed_distance import BodySurface
-    from swingar_pyg.geometry import mesh_edge_index
-    from swingar_pyg.inference.prediction import garment_graph
-
     if precision not in ("fp32", "bf16"):
         raise ValueError(f"precision must be fp32 or bf16, got {precision!r}")
     estimator = estimator.eval()
@@ -178,8 +177,6 @@ def _resimulate(sequences: list[TestSequence], settings_for: Callable[[dict], ob
                 body) -> tuple[dict, list, float]:
     """Each sequence simulated again with ``settings_for(stored settings)``: errors
     against its stored ground truth, seconds per frame, largest strain."""
-    from swingar_pyg.world.sequence import simulate_sequence
-
     errors, seconds, strain = {}, [], 0.0
     for s in sequences:
         stored = {**s.settings, "gravity": tuple(s.settings["gravity"])}
@@ -196,8 +193,6 @@ def evaluate_simulator(sequences: list[TestSequence], substeps: int, iterations:
     """The simulator re-run on each sequence with other substeps and iterations
     (all else as stored), against the stored ground truth: at fixed substeps, or
     with ``max_substeps`` error-controlled (``XPBDSettings.max_substeps``)."""
-    from swingar_pyg.sim import XPBDSettings
-
     errors, seconds, strain = _resimulate(
         sequences, lambda stored: XPBDSettings(**{**stored, "substeps": substeps,
                                                   "iterations": iterations,
@@ -223,8 +218,6 @@ def evaluate_second_simulator(sequences: list[TestSequence], substeps: int, iter
     """newton's VBD solver on the same scenes (frame rate, gravity, density, damping,
     friction, thickness and settling as stored): its distance from the XPBD ground
     truth is the floor two credible simulators set (see ``swingar_pyg.sim.vbd``)."""
-    from swingar_pyg.sim import VBDSettings
-
     shared = ("fps", "gravity", "density", "damping", "friction", "thickness", "settle_frames")
     errors, seconds, strain = _resimulate(
         sequences, lambda stored: VBDSettings(substeps=substeps, iterations=iterations,

@@ -2,13 +2,12 @@
 ablations and the stability suite, measured in one run and written to one
 folder (Markdown, CSV, PNG, JSON).
 
-The config names a test split (through its dataset config, generated if
-missing; ``extra_tests`` adds other test splits, e.g. a garment type never
-trained on, evaluated on the first model), the trained models (each a stack of training configs and seeds; a
-missing checkpoint is trained first when ``train_missing``), the precisions and
-collision passes to evaluate them with, the simulator settings to place
-against them, the garment sizes to stream, and the stability suite's size. See
-``configs/report/quickstart.yaml``.
+The config names a test split (through its dataset config, generated if missing;
+``extra_tests`` adds other test splits, e.g. a garment type never trained on, evaluated on
+the first model), the trained models (each a stack of training configs and seeds; a
+missing checkpoint is trained first when ``train_missing``), the precisions and collision
+passes to evaluate them with, the simulator settings to place against them, the garment
+sizes to stream, and the stability suite's size. See ``configs/report/quickstart.yaml``.
 """
 
 from __future__ import annotations
@@ -23,7 +22,28 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from swingar_pyg.collision import NeuralCollisions
+from swingar_pyg.eval.error_vs_time import (
+    MethodResult,
+    equal_error_speedup,
+    evaluate_estimator,
+    evaluate_rigid,
+    evaluate_second_simulator,
+    evaluate_simulator,
+    load_test_sequences,
+)
+from swingar_pyg.eval.report_writer import write_report
+from swingar_pyg.eval.stability import FULL, SMALL, run_stability
+from swingar_pyg.geometry.spectral import DESCRIPTOR_SIGMA
 from swingar_pyg.inference import SwinGarStream
+from swingar_pyg.inference.prediction import garment_graph
+from swingar_pyg.training import load_body_sdf, load_estimator
+from swingar_pyg.training.cli import build_cli
+from swingar_pyg.world.body import AnnyBody
+from swingar_pyg.world.dataset import DatasetConfig, make_dataset
+from swingar_pyg.world.motion_library import make_motion
+from swingar_pyg.world.skirt import SkirtSpec, fit_procedural_skirt
+
 
 @dataclass(frozen=True)
 class ModelSpec:
@@ -147,8 +167,6 @@ def ensure_checkpoint(configs: tuple[str, ...], seed: int, train_missing: bool) 
     """The best checkpoint of a config stack and seed; a run that is missing or
     was cut off before its ``max_steps`` is trained first (resuming
     ``last.ckpt``) when ``train_missing``."""
-    from swingar_pyg.training.cli import build_cli
-
     folder, arguments = _run_folder(configs, seed)
     last = folder / "checkpoints" / "last.ckpt"
     best = _best_checkpoint(folder)
@@ -195,8 +213,6 @@ def _machine() -> dict:
 
 
 def _test_split(dataset: str) -> Path:
-    from swingar_pyg.world.dataset import DatasetConfig, make_dataset
-
     config = DatasetConfig.from_yaml(dataset)
     path = Path(config.output) / "test.h5"
     if not path.exists():
@@ -205,10 +221,6 @@ def _test_split(dataset: str) -> Path:
 
 
 def _streaming_fps(estimator, body, vertices: tuple[int, ...], frames: int) -> list[dict]:
-    from swingar_pyg.inference.prediction import garment_graph
-    from swingar_pyg.world.skirt import SkirtSpec, fit_procedural_skirt
-    from swingar_pyg.world.motion_library import make_motion
-
     shape = body.default_shape()
     motion = make_motion("walk", body, shape, seconds=frames / 30.0)
     posed = body.pose(shape, motion.rotations, motion.translation)
@@ -231,18 +243,6 @@ def _streaming_fps(estimator, body, vertices: tuple[int, ...], frames: int) -> l
 def run_report(config: ReportConfig, progress: bool = True, log=print) -> Path:
     """Measures everything the config asks for and writes the report folder;
     returns the path of ``report.md``."""
-    from swingar_pyg.collision import NeuralCollisions
-    from swingar_pyg.eval.error_vs_time import (
-        equal_error_speedup,
-        evaluate_estimator,
-        evaluate_rigid,
-        evaluate_second_simulator,
-        evaluate_simulator,
-        load_test_sequences,
-    )
-    from swingar_pyg.training import load_body_sdf, load_estimator
-    from swingar_pyg.world.body import AnnyBody
-
     out = Path(config.output)
     started = time.perf_counter()
     body = AnnyBody()
@@ -275,7 +275,8 @@ def run_report(config: ReportConfig, progress: bool = True, log=print) -> Path:
                 label = _label(model.name, precision, pass_)
                 log(f"estimator: {label}, seed {seed}")
                 collisions = {"none": None, "exact": "exact", "neural": neural}[pass_]
-                result = evaluate_estimator(label, estimator, sequences, data.get("sigma", 0.1),
+                result = evaluate_estimator(label, estimator, sequences,
+                                            data.get("sigma", DESCRIPTOR_SIGMA),
                                             data.get("seed", 0), precision, collisions, body)
                 result.extra.update(model=model.name, seed=seed, collisions=pass_)
                 if seed == model.seeds[0]:
@@ -302,17 +303,14 @@ def run_report(config: ReportConfig, progress: bool = True, log=print) -> Path:
         for model in config.models:
             estimator, data = load_estimator(checkpoints[f"{model.name} (seed {model.seeds[0]})"])
             rows_.append(evaluate_estimator(model.name, estimator, extra_sequences,
-                                            data.get("sigma", 0.1), data.get("seed", 0)).row())
+                                            data.get("sigma", DESCRIPTOR_SIGMA),
+                                            data.get("seed", 0)).row())
         extra[name] = {"estimators": rows_, "rigid": evaluate_rigid(extra_sequences).row()}
     stability = []
     if config.stability != "off":
-        from swingar_pyg.eval.stability import FULL, SMALL, run_stability
-
         log("stability suite")
         stability = run_stability(FULL if config.stability == "full" else SMALL,
                                   first_estimator, body_sdf, progress=progress)
-    from swingar_pyg.eval.report_writer import write_report
-
     return write_report(out, config, machine=_machine(), test_path=test_path,
                         sequences=sequences, results=results, per_model=per_model,
                         rigid=rigid, simulator=simulator, second=second, simulated=chosen,
@@ -342,8 +340,6 @@ def _spread(sequences: list, count: int) -> list:
 
 def _restricted(result, sequences):
     """``result`` on ``sequences`` only (the ones the simulator re-ran)."""
-    from swingar_pyg.eval.error_vs_time import MethodResult
-
     keep = {s.id for s in sequences}
     return MethodResult(result.name, result.kind, {k: v for k, v in result.errors.items()
                                                    if k in keep}, result.seconds, result.extra)

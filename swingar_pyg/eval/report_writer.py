@@ -14,6 +14,8 @@ import torch
 
 from swingar_pyg.atomic import atomic_path
 from swingar_pyg.eval.error_vs_time import setting_name, simulator_front
+from swingar_pyg.eval.stability import as_dicts, stability_summary, stability_table
+from swingar_pyg.training.vertex_errors import error_stats
 
 
 def _write_text(path: Path, text: str) -> None:
@@ -169,8 +171,6 @@ def write_report(out: Path, config, *, machine, test_path, sequences, results, p
                  rigid, simulator, second, simulated, speedups, streaming, extra, stability,
                  checkpoints, body_sdf, seconds) -> Path:
     out.mkdir(parents=True, exist_ok=True)
-    from swingar_pyg.eval.stability import as_dicts, stability_summary, stability_table
-
     finest = max(simulator, key=lambda r: r.extra["substeps"] * r.extra["iterations"])
     floor = None
     if not finest.extra["is_ground_truth_setting"]:
@@ -184,8 +184,6 @@ def write_report(out: Path, config, *, machine, test_path, sequences, results, p
         for run in runs:
             for key, group in (("garment", _garment), ("motion", _motion)):
                 for name, errors in _groups(run, sequences, group).items():
-                    from swingar_pyg.training.vertex_errors import error_stats
-
                     garment_rows.append({"method": label, "seed": run.extra.get("seed", ""),
                                          key: name, **error_stats(errors)})
     _write_csv(out / "per_garment.csv", [r for r in garment_rows if "garment" in r])

@@ -22,6 +22,7 @@ from swingar_pyg.geometry.signed_distance import (
     inside_share,
 )
 from swingar_pyg.geometry.spectral import (
+    DESCRIPTOR_SIGMA,
     SpectralDescriptor,
     exact_affinity_spectrum,
     gaussian_affinity,
@@ -49,5 +50,6 @@ __all__ = [
     "sheet",
     "split_quads",
     "spectral_descriptor",
+    "DESCRIPTOR_SIGMA",
     "vertex_normals",
 ]

@@ -66,6 +66,11 @@ class SpectralDescriptor:
     eigenvectors: np.ndarray | None = None
 
 
+DESCRIPTOR_SIGMA = 0.1
+"""The descriptor's kernel width (m): the one default of every function, datamodule and
+command that computes a descriptor."""
+
+
 def gaussian_affinity(distances: np.ndarray, sigma: float) -> np.ndarray:
     r"""The kernel :math:`\exp(-d^2 / 2\sigma^2)`; infinite distance gives 0."""
     return np.exp(-np.square(distances) / (2.0 * sigma * sigma))
@@ -82,7 +87,7 @@ def _affinity(distances: np.ndarray, kernel: Kernel, sigma: float) -> np.ndarray
 def spectral_descriptor(
     mesh: Mesh,
     z: int = 256,
-    sigma: float = 0.1,
+    sigma: float = DESCRIPTOR_SIGMA,
     kernel: Kernel = "gaussian",
     normalize: bool = False,
     weighting: Literal["voronoi", "uniform"] = "voronoi",
@@ -160,7 +165,10 @@ def _quadrature_weights(distances: np.ndarray, weighting: str) -> np.ndarray:
 
 
 def exact_affinity_spectrum(
-    mesh: Mesh, sigma: float = 0.1, kernel: Kernel = "gaussian", normalize: bool = False
+    mesh: Mesh,
+    sigma: float = DESCRIPTOR_SIGMA,
+    kernel: Kernel = "gaussian",
+    normalize: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Reference: all-pairs geodesics and the full eigendecomposition of ``A``.
 

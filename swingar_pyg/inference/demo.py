@@ -17,6 +17,7 @@ from torch_geometric.data import Batch, Data
 from tqdm import tqdm
 
 from swingar_pyg.geometry import mesh_edge_index, spectral_descriptor, vertex_normals
+from swingar_pyg.geometry.spectral import DESCRIPTOR_SIGMA
 from swingar_pyg.nn import FCAStack
 from swingar_pyg.world.garment_assets import load_shipped_garment, shipped_garments
 
@@ -36,7 +37,7 @@ def _milliseconds(start: float) -> float:
     return 1e3 * (time.perf_counter() - start)
 
 
-def run_demo(garments: list[str] | None = None, z: int = 256, sigma: float = 0.1,
+def run_demo(garments: list[str] | None = None, z: int = 256, sigma: float = DESCRIPTOR_SIGMA,
              alpha: float = 2.0, device: str | None = None) -> list[GarmentReport]:
     """Runs the demo and prints a table; returns one report per garment."""
     device = torch.device(device or ("cuda" if torch.cuda.is_available() else "cpu"))

@@ -19,6 +19,7 @@ import torch
 
 from swingar_pyg.atomic import atomic_path
 from swingar_pyg.geometry import BodySurface, load_mesh
+from swingar_pyg.geometry.spectral import DESCRIPTOR_SIGMA
 from swingar_pyg.inference.scene import Scene, compile_scene
 from swingar_pyg.inference.streaming import SwinGarStream
 from swingar_pyg.models import BodySDF, GarmentWindow, SwinGarEstimator
@@ -31,7 +32,7 @@ from swingar_pyg.world.motion_library import make_motion
 
 
 def garment_graph(garment, num_joints: int, descriptor_size: int | None,
-                  sigma: float = 0.1, seed: int = 0) -> GarmentWindow:
+                  sigma: float = DESCRIPTOR_SIGMA, seed: int = 0) -> GarmentWindow:
     """The estimator's garment inputs (:meth:`GarmentWindow.from_garment`) for a
     :class:`~swingar_pyg.world.garment.Garment`, its features computed as the
     datamodule's feature cache computes them."""
@@ -114,7 +115,7 @@ def predict_to_folder(estimator: SwinGarEstimator, garment: str, motion: str, ou
     fitted = _load_garment(garment, body, shape)
     clip = make_motion(motion, body, shape, seconds=seconds)
     scene = Scene([fitted], body, shape, clip, collisions=collisions, body_sdf=body_sdf)
-    result = compile_scene(scene, estimator, sigma=data_settings.get("sigma", 0.1),
+    result = compile_scene(scene, estimator, sigma=data_settings.get("sigma", DESCRIPTOR_SIGMA),
                            seed=data_settings.get("seed", 0)).run(progress)
     if not torch.isfinite(result.vertices[0]).all():
         raise ValueError("the estimator produced non-finite vertices; the checkpoint or the "

@@ -1,4 +1,4 @@
-"""Scene-driven inference (DESIGN §9): leave out what a scene does not need.
+"""Scene-driven inference (docs/design.md §9): leave out what a scene does not need.
 
 A :class:`Scene` says what is there (garments fitted on a body, the body's shape
 and motion) and what is wanted (skinning only, collision handling or not).
@@ -44,6 +44,7 @@ from swingar_pyg.collision import (
 )
 from swingar_pyg.geometry import mesh_edge_index
 from swingar_pyg.geometry.skinning import linear_blend_skinning
+from swingar_pyg.geometry.spectral import DESCRIPTOR_SIGMA
 from swingar_pyg.inference.streaming import SwinGarStream
 from swingar_pyg.models import BodySDF, GarmentWindow
 from swingar_pyg.models.garment_window import garment_graph_features
@@ -111,7 +112,7 @@ class GarmentFeatureCache:
         digest.update(repr((descriptor_size, sigma, seed)).encode())
         return digest.hexdigest()
 
-    def get(self, mesh, descriptor_size: int | None, sigma: float = 0.1,
+    def get(self, mesh, descriptor_size: int | None, sigma: float = DESCRIPTOR_SIGMA,
             seed: int = 0) -> dict | None:
         """The cached features, or ``None``."""
         key = self.key(mesh, descriptor_size, sigma, seed)
@@ -126,7 +127,7 @@ class GarmentFeatureCache:
             self.hits += 1
         return found
 
-    def compute(self, mesh, descriptor_size: int | None, sigma: float = 0.1,
+    def compute(self, mesh, descriptor_size: int | None, sigma: float = DESCRIPTOR_SIGMA,
                 seed: int = 0) -> dict:
         """Computes the features and caches them."""
         key = self.key(mesh, descriptor_size, sigma, seed)
@@ -225,7 +226,7 @@ class ScenePipeline:
     """The stages a scene needs (see the module docstring); :meth:`run` runs them."""
 
     def __init__(self, scene: Scene, estimator=None, cache: GarmentFeatureCache | None = None,
-                 sigma: float = 0.1, seed: int = 0, collision_margin: float = 0.03):
+                 sigma: float = DESCRIPTOR_SIGMA, seed: int = 0, collision_margin: float = 0.03):
         if estimator is None and not scene.skinning_only:
             raise ValueError("a scene that is not skinning_only needs an estimator")
         self.scene, self.estimator = scene, estimator

@@ -1,4 +1,4 @@
-r"""A neural signed distance field of a posed body (paper §3.4, DESIGN §5).
+r"""A neural signed distance field of a posed body (paper §3.4, docs/design.md §5).
 
 Sign convention (the paper's): :math:`S(\mathbf{x}) > 0` **inside** the body,
 so :math:`\nabla S` points inward and :math:`-\nabla S / \lVert \nabla S \rVert`

@@ -1,4 +1,4 @@
-r"""The SwinGar estimator (paper §3.3, DESIGN §4).
+r"""The SwinGar estimator (paper §3.3, docs/design.md §4).
 
 .. math::
     \mathbf{M}^t = W(\mathbf{M}^0, \boldsymbol\beta, \boldsymbol\theta^{t-m..t})
@@ -20,7 +20,8 @@ over :math:`G^{t-2}, G^{t-1}, G^t` built on :math:`\mathbf{M}_c` with features
 :math:`[\mathbf{x}, \lVert \mathbf{x} - \mathbf{j}_k \rVert_{k=1..J}]`, and
 
 .. math::
-    \mathbf{M}^t = \mathbf{M}_c^t + \mathbf{R}_c\, \mathrm{Linear}(\mathbf{h}^t \odot \mathbf{c}_b^t).
+    \mathbf{M}^t = \mathbf{M}_c^t
+        + \mathbf{R}_c\, \mathrm{Linear}(\mathbf{h}^t \odot \mathbf{c}_b^t).
 
 Beyond the paper: the skinning logits are added to :math:`\log` of the weights
 transferred from the body (``skinning_prior``), and the last layers of both

@@ -11,6 +11,7 @@ from torch import Tensor
 from torch_geometric.data import Data
 
 from swingar_pyg.geometry import mesh_edge_index, spectral_descriptor, vertex_normals
+from swingar_pyg.geometry.spectral import DESCRIPTOR_SIGMA
 
 # Graph-level tensors carry a leading dimension of 1 per garment, so that a
 # Batch concatenates them into one row per garment.
@@ -76,7 +77,7 @@ def dense_skinning_weights(indices, weights, num_joints: int) -> Tensor:
     return dense.scatter_add_(1, indices, torch.as_tensor(weights, dtype=torch.float32))
 
 
-def garment_graph_features(mesh, descriptor_size: int | None, sigma: float = 0.1,
+def garment_graph_features(mesh, descriptor_size: int | None, sigma: float = DESCRIPTOR_SIGMA,
                            seed: int = 0, weighting: str = "voronoi") -> dict[str, Any]:
     """What the estimator needs of a rest garment mesh beyond its vertices:
     ``edge_index`` (mesh edges, both ways), unit ``normal`` ``(N, 3)`` and, unless

@@ -1,4 +1,4 @@
-r"""Training losses of the estimator (DESIGN §4), on frames ``(F, N, 3)`` of a
+r"""Training losses of the estimator (docs/design.md §4), on frames ``(F, N, 3)`` of a
 Batch of garments; positions in metres.
 
 - vertex: :math:`\frac{1}{FN}\sum \lVert \mathbf{x} - \hat{\mathbf{x}} \rVert^2`

@@ -4,7 +4,6 @@ from typing import Optional
 
 import torch
 from torch import Tensor
-
 from torch_geometric import EdgeIndex
 from torch_geometric.utils import add_remaining_self_loops
 

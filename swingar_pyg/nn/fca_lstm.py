@@ -3,7 +3,6 @@ from typing import Optional, Sequence, Tuple, Union
 import torch
 from torch import Tensor
 from torch.nn import Module, Parameter
-
 from torch_geometric.utils import add_remaining_self_loops
 
 from swingar_pyg.nn.fca_conv import FCAConv

@@ -1,4 +1,4 @@
-"""Ground-truth cloth simulation (DESIGN §8)."""
+"""Ground-truth cloth simulation (docs/design.md §8)."""
 
 from swingar_pyg.sim.collider import BodyCollider
 from swingar_pyg.sim.recording import STRETCH_BAR, SimulationResult

@@ -7,9 +7,13 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
+import scipy.sparse as sparse
 import torch
+from scipy.sparse.csgraph import dijkstra
+from scipy.spatial import cKDTree
 from torch import Tensor
 
+from swingar_pyg.geometry.mesh import mesh_edges
 from swingar_pyg.sim.collider import BodyCollider
 from swingar_pyg.sim.constraints import DistanceConstraints
 
@@ -138,9 +142,6 @@ def stretch_by_place(strain: Tensor, pairs: Tensor, pinned: np.ndarray, num_vert
     Returns:
         The three largest stretches (0 where a place holds no stretched edge).
     """
-    import scipy.sparse as sparse
-    from scipy.sparse.csgraph import dijkstra
-
     if strain.shape[1] != pairs.shape[0] or body_distance.shape != (strain.shape[0],
                                                                     num_vertices):
         raise ValueError(f"strain {tuple(strain.shape)}, pairs {tuple(pairs.shape)} and "
@@ -167,8 +168,6 @@ def stretch_by_place(strain: Tensor, pairs: Tensor, pinned: np.ndarray, num_vert
 def garment_edge_strain(mesh: "Mesh", positions: Tensor) -> tuple[Tensor, Tensor]:
     """The mesh edges ``(E, 2)`` of a garment and their :func:`signed_edge_strain`
     ``(T, E)`` in ``positions`` ``(T, N, 3)`` against the rest ``mesh``."""
-    from swingar_pyg.geometry.mesh import mesh_edges
-
     pairs = torch.as_tensor(mesh_edges(mesh.faces))
     rest = torch.as_tensor(mesh.vertices, dtype=positions.dtype)
     rest_lengths = (rest[pairs[:, 0]] - rest[pairs[:, 1]]).norm(dim=-1)
@@ -178,8 +177,6 @@ def garment_edge_strain(mesh: "Mesh", positions: Tensor) -> tuple[Tensor, Tensor
 def nearest_body_distance(positions: Tensor, body_vertices: Tensor) -> Tensor:
     """Per frame, each of ``positions`` ``(T, N, 3)``'s distance to its nearest vertex
     of the body ``body_vertices`` ``(T, V, 3)``: ``(T, N)``."""
-    from scipy.spatial import cKDTree
-
     if positions.shape[0] != body_vertices.shape[0]:
         raise ValueError(f"the cloth has {positions.shape[0]} frames, the body "
                          f"{body_vertices.shape[0]}")

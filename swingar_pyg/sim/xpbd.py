@@ -12,26 +12,26 @@ compliance :math:`\alpha` (m/N; 0 is inextensible) is solved by
 with inverse masses :math:`w` (0 for pinned vertices; a constraint with
 :math:`w_i + w_j + \tilde\alpha = 0` is skipped rather than dividing 0 by 0).
 Stretch constraints are the mesh edges. Bending is either the hinges' dihedral
-angles (``bending="dihedral"``, the default and the datasets' model since
-simulator revision 4: :math:`C = \theta - \theta_0` wrapped to
+angles (``bending="dihedral"``, the default and the datasets' model:
+:math:`C = \theta - \theta_0` wrapped to
 :math:`(-\pi, \pi]`, energy :math:`\tfrac12 k \|\mathbf{e}_0\| C^2` with
 ``bend_stiffness`` :math:`k`, as newton's VBD cloth, so the two simulators
 compare like for like; compliance :math:`1 / (k \|\mathbf{e}_0\|)`) or distance
 constraints between the opposite vertices of adjacent triangles
-(``bending="distance"``, revision 3's model: it also resists the in-plane
+(``bending="distance"``: it also resists the in-plane
 compression that folding needs, so flares fall less). Each iteration solves the
 bending, projects the tethers (:class:`~swingar_pyg.sim.constraints.TetherConstraints`:
 no free vertex ends farther from its nearest pin than its rest geodesic distance plus
 ``tether_slack``, which bounds stretch when few sweeps cannot carry the pins' pull
 across the cloth: large time steps, fast bodies), pushes the cloth out of the body,
 and solves the stretch last, so that the positions a substep ends with are the ones
-whose edges are nearest their rest lengths (since simulator revision 7).
+whose edges are nearest their rest lengths.
 Distance constraints are coloured so that each colour is a parallel Gauss–Seidel
 sweep. Hinges are solved in one Jacobi sweep, each vertex's corrections averaged
 over its hinges (Macklin et al. 2014): a hinge has four vertices, so colouring
 needs ~14 colours and costs ~4x the sweep (measured), for no closer agreement
 with VBD. Many short substeps keep stiff cloth stable and the
-swing free (DESIGN §8). With ``max_substeps`` set the substep is error-controlled: a
+swing free (docs/design.md §8). With ``max_substeps`` set the substep is error-controlled: a
 frame that ends with an edge strain above ``target_stretch`` is run again from its
 start at twice the substeps (up to ``max_substeps``), so the cost goes to the frames
 that need it and each frame's substeps are recorded. Where the pins and the body hold
@@ -71,14 +71,8 @@ from swingar_pyg.sim.recording import (
 )
 
 # Raise whenever a change alters simulated positions: dataset files record it, and the
-# datamodule warns when it trains on sequences an older simulator made. Revision 6: the
-# solver of revision 4, on the garments of revision 5 (rest shapes that wrap the convex hull
-# of the body's cross-sections), whose pinned bands each move as one (revision 5's followed
-# anny's skin point by point, which stretched a dress's top edge by 40 % in a twist).
-# Revision 7: each sweep solves the stretch last, after bending, tethers and contacts
-# (revision 6 solved it first), so a substep ends nearest the rest lengths. Measured side by
-# side it moves the largest strain about as much as a 1-um move of the garment does, not
-# systematically (README, "Solving the stretch last").
+# datamodule warns when it trains on sequences an older simulator made. What each revision
+# changed: CHANGELOG.md, "Simulator revisions".
 SIMULATOR_REVISION = 7
 
 

@@ -48,6 +48,9 @@ class SwinGarCLI(LightningCLI):
         parser.add_lightning_class_args(LastStepCheckpoint, "checkpoint")
         parser.link_arguments("trainer.default_root_dir", "checkpoint.dirpath",
                               compute_fn=lambda root: f"{root}/checkpoints")
+        for name in ("descriptor_size", "history"):
+            parser.link_arguments(f"data.init_args.{name}",
+                                  f"model.init_args.estimator.init_args.{name}")
 
     def before_instantiate_classes(self) -> None:
         config = self.config[self.subcommand] if self.subcommand else self.config

@@ -15,5 +15,14 @@ def save_hyperparameters_with_network(module: L.LightningModule, network: str) -
     alone; made in Python, the ``network`` argument is a module, is left out,
     and must be passed when loading."""
     made_by_cli = _given_hyperparameters.get() is not None
-    module.save_hyperparameters(ignore=[] if made_by_cli else [network],
-                                frame=inspect.currentframe().f_back)
+    caller = inspect.currentframe().f_back
+    module.save_hyperparameters(ignore=[] if made_by_cli else [network], frame=caller)
+    config = module.hparams.get(network) if made_by_cli else None
+    if isinstance(config, dict):
+        # The CLI's config leaves out values linked into the network from elsewhere (the
+        # estimator's descriptor_size and history come from the data): take them from it.
+        instance = caller.f_locals[network]
+        init_args = config.setdefault("init_args", {})
+        for name in inspect.signature(type(instance).__init__).parameters:
+            if name not in init_args and name != "self" and hasattr(instance, name):
+                init_args[name] = getattr(instance, name)

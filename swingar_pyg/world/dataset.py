@@ -120,7 +120,8 @@ def plan_jobs(config: DatasetConfig) -> list[Job]:
     for split in SPLITS:
         combos = [(g, m, k) for g in config.garments.get(split, ())
                   for m in config.motions.get(split, ()) for k in range(len(config.body_shapes))]
-        jobs += [Job(split, i, g, m, k, config.body_shapes[k]) for i, (g, m, k) in enumerate(combos)]
+        jobs += [Job(split, i, g, m, k, config.body_shapes[k])
+                 for i, (g, m, k) in enumerate(combos)]
     return jobs
 
 

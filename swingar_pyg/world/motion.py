@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
+from scipy.spatial.transform import Rotation, Slerp
 from torch import Tensor
 
 from swingar_pyg.geometry.skinning import axis_angle_to_matrix
@@ -165,8 +166,6 @@ def ease_from_rest(motion: Motion, seconds: float = 0.5) -> Motion:
     """Prepends ``seconds`` in which the body moves smoothly (slerp per joint,
     smoothstep timing) from its rest pose into the motion's first frame, so that a
     garment fitted in the rest pose starts in equilibrium instead of being jolted."""
-    from scipy.spatial.transform import Rotation, Slerp
-
     frames = max(1, round(seconds * motion.fps))
     weights = _ease_in(torch.arange(frames, dtype=torch.float32), float(frames)).numpy()
     first = motion.rotations[0].double().numpy()

@@ -30,8 +30,12 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.interpolate import RegularGridInterpolator
+from scipy.ndimage import gaussian_filter, maximum_filter, minimum_filter
+from scipy.spatial import Delaunay, cKDTree
 
 from swingar_pyg.geometry.mesh import Mesh, as_mesh
+from swingar_pyg.geometry.signed_distance import BodySurface
 from swingar_pyg.world.body import BodyModel, rest_pose
 from swingar_pyg.world.garment import (
     ARM_BONE_WORDS,
@@ -214,8 +218,6 @@ def triangulate_pattern(pattern: Pattern, vertices: int, jitter: float = 0.0,
         ValueError: if the outline crosses itself.
     """
     from matplotlib.path import Path as PolygonPath
-    from scipy.spatial import Delaunay
-
     outline = pattern.outline
     edges = np.roll(outline, -1, axis=0) - outline
     if _crosses_itself(outline):
@@ -351,10 +353,6 @@ def sew_panels(points: np.ndarray, triangles: np.ndarray, on_seam: np.ndarray
 def _depth_maps(body_xyz: np.ndarray) -> tuple[Callable, Callable]:
     """Smooth front (min y) and back (max y) depth of the body points over (x, z),
     filled outside the body from its nearest part."""
-    from scipy.interpolate import RegularGridInterpolator
-    from scipy.ndimage import gaussian_filter, maximum_filter, minimum_filter
-    from scipy.spatial import cKDTree
-
     low = body_xyz[:, [0, 2]].min(axis=0) - 0.3
     high = body_xyz[:, [0, 2]].max(axis=0) + 0.3
     shape = np.ceil((high - low) / _DEPTH_BIN).astype(int) + 1
@@ -405,8 +403,6 @@ def push_out(mesh: Mesh, body_vertices: np.ndarray, body_faces: np.ndarray,
     """``mesh`` with every vertex nearer the body than ``clearance`` (or inside it)
     moved out along the body's outward normal to ``clearance``; again, up to
     ``passes`` times, where a move brought a vertex near another part (a crease)."""
-    from swingar_pyg.geometry.signed_distance import BodySurface
-
     surface = BodySurface(body_vertices, body_faces)
     vertices = mesh.vertices.copy()
     for _ in range(passes):

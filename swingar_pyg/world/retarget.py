@@ -1,4 +1,4 @@
-r"""Retargeting motion capture onto a body rig by joint names (DESIGN §6).
+r"""Retargeting motion capture onto a body rig by joint names (docs/design.md §6).
 
 The clip's axes are converted once (BVH: +Y up, facing +Z; here: +Z up, facing
 -Y). Frame 0 of a CMU clip is a T-pose while anny rests in an A-pose, so each

@@ -20,7 +20,7 @@ from swingar_pyg.world.motion import Motion
 
 @dataclass
 class SimulatedSequence:
-    """Everything a dataset stores about a sequence (DESIGN §7).
+    """Everything a dataset stores about a sequence (docs/design.md §7).
 
     Attributes:
         garment, motion: what was simulated.

@@ -1,4 +1,4 @@
-"""Simulated sequences in HDF5 (DESIGN §7), written atomically.
+"""Simulated sequences in HDF5 (docs/design.md §7), written atomically.
 
 Layout::
 
@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from swingar_pyg.atomic import atomic_path
+from swingar_pyg.geometry import as_mesh
 from swingar_pyg.sim import SIMULATOR_REVISION
 from swingar_pyg.world.garment import Garment
 from swingar_pyg.world.sequence import SimulatedSequence
@@ -125,8 +126,6 @@ def read_sequence(path: str | Path, sequence_id: str) -> dict:
 def read_garment(path: str | Path, name: str) -> Garment:
     """A garment stored in a sequence file, as the simulator was given it."""
     import h5py
-
-    from swingar_pyg.geometry import as_mesh
 
     with h5py.File(path, "r") as file:
         if name not in file.get("garments", {}):
