@@ -10,9 +10,12 @@ from typing import Iterator
 
 
 @contextmanager
-def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
+def atomic_path(path: str | os.PathLike, suffix: str = ".tmp") -> Iterator[Path]:
     """Yields a temporary path beside ``path``; renames it onto ``path`` when the
     block succeeds and removes it when the block raises.
+
+    ``suffix`` ends the temporary file's name: writers that choose the format by
+    the extension (USD's ``Export``) need the target's, e.g. ``".tmp.usd"``.
 
     The rename is atomic on POSIX (same directory, same file system), so readers
     see either the old file or the complete new one.
@@ -23,7 +26,7 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     target = Path(path)
     target.parent.mkdir(parents=True, exist_ok=True)
     handle, name = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.",
-                                    suffix=".tmp")
+                                    suffix=suffix)
     os.close(handle)
     temporary = Path(name)
     umask = os.umask(0)

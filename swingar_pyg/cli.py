@@ -17,9 +17,11 @@ import torch
 from swingar_pyg import __version__
 from swingar_pyg.geometry.spectral import DESCRIPTOR_SIGMA
 from swingar_pyg.inference.demo import run_demo
+from swingar_pyg.inference.export import check_writers, parse_formats
 from swingar_pyg.inference.prediction import predict_to_folder
 from swingar_pyg.inference.scene import StageCost, stage_table
 from swingar_pyg.sim import STRETCH_BAR, VBDSettings, XPBDSettings
+from swingar_pyg.verbosity import set_verbose
 from swingar_pyg.viz.preview import render_sequence
 from swingar_pyg.world.body import AnnyBody
 from swingar_pyg.world.catalogue import fit_garment, garment_spec
@@ -150,6 +152,10 @@ def build_parser() -> argparse.ArgumentParser:
         epilog="Training: swingar {fit,validate,test,predict} -c configs/<name>.yaml "
                "(Lightning's CLI; see swingar fit --help).")
     parser.add_argument("--version", action="version", version=f"swingar_pyg {__version__}")
+    parser.add_argument("--verbose", action="store_true",
+                        help="keep dependencies' start-up messages (NVIDIA Warp's banner, "
+                             "silenced by default); before the command: swingar --verbose "
+                             "simulate ...")
     commands = parser.add_subparsers(dest="command", metavar="COMMAND")
 
     demo = commands.add_parser(
@@ -238,8 +244,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     predict = commands.add_parser(
         "predict", help="animate any garment on any motion with a trained checkpoint and "
-                        "export OBJ frames, an .npz and a preview GIF (without --garment: "
-                        "Lightning's predict over a config's test split)")
+                        "export OBJ frames (or PC2, USD), an .npz and a preview GIF (without "
+                        "--garment: Lightning's predict over a config's test split)")
     predict.add_argument("--ckpt", required=True, help="a checkpoint of `swingar fit`")
     predict.add_argument("--garment", required=True,
                          help="an OBJ/PLY dressed on the rest body (metres, +Z up) or a "
@@ -249,6 +255,11 @@ def build_parser() -> argparse.ArgumentParser:
     predict.add_argument("--body-shape", type=float, nargs=6, metavar="P")
     predict.add_argument("--seconds", type=float, default=None)
     predict.add_argument("--out", default="runs/predict")
+    predict.add_argument("--format", dest="formats", action="append", metavar="FORMATS",
+                         help="what to export, comma-separated or repeated: obj (frames/"
+                              "frame_NNNN.obj, the default), pc2 (garment.pc2 for Blender's "
+                              "Mesh Cache modifier, with garment_rest.obj), usd (garment.usd: "
+                              "the garment and the body, time-sampled; extra usd)")
     predict.add_argument("--no-preview", dest="preview", action="store_false")
     predict.add_argument("--no-collisions", dest="collisions", action="store_false",
                          help="keep vertices the estimator put inside the body")
@@ -278,16 +289,19 @@ def build_parser() -> argparse.ArgumentParser:
 def _predict(args: argparse.Namespace) -> int:
     from swingar_pyg.training import load_body_sdf, load_estimator
 
+    formats = parse_formats(args.formats or ["obj"])
+    check_writers(formats)  # a missing usd-core fails before the checkpoint loads
     estimator, data_settings = load_estimator(args.ckpt)
     body_sdf = load_body_sdf(args.body_sdf) if args.body_sdf else None
     summary = predict_to_folder(estimator, args.garment, args.motion, args.out,
                                 args.body_shape, args.seconds, args.preview,
                                 collisions=args.collisions, body_sdf=body_sdf,
-                                data_settings=data_settings, checkpoint=args.ckpt)
+                                data_settings=data_settings, checkpoint=args.ckpt,
+                                formats=formats)
     print(stage_table([StageCost(**stage) for stage in summary["stages"]]))
     print(f"{summary['garment']} ({summary['vertices']} vertices) on {summary['motion']}: "
           f"{summary['frames']} frames, estimator {summary['estimator_ms_per_frame']:.1f} "
-          f"ms/frame -> {args.out}")
+          f"ms/frame -> {args.out} ({', '.join(summary['exported'])})")
     if summary["collisions"]:
         counts = summary["collisions"]
         print(f"collisions ({counts['sdf']} SDF, on {counts['ran_on_frames']} frames): moved "
@@ -314,6 +328,9 @@ def _report(args: argparse.Namespace) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["--verbose"]:
+        set_verbose(True)  # before anything initialises warp; spawned workers inherit it
+        argv = argv[1:]
     exporting = argv[:1] == ["predict"] and any(a.startswith("--garment") for a in argv)
     if argv and argv[0] in LIGHTNING_COMMANDS and not exporting:
         from swingar_pyg.training.cli import build_cli
@@ -322,6 +339,8 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     parser = build_parser()
     args = parser.parse_args(argv)
+    if args.verbose:
+        set_verbose(True)
     if args.command is None:
         parser.print_help()
         return 0

@@ -25,6 +25,7 @@ REQUIRED_IN_CI = {
     'nbformat': 'dev (through nbmake)',
     'ruff': 'dev',
     'newton': 'newton',
+    'pxr': 'usd (in dev)',
     'smplx': 'smpl (in dev)',
     'trimesh': 'data (in dev)',
 }

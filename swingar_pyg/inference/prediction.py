@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +21,13 @@ import torch
 from swingar_pyg.atomic import atomic_path
 from swingar_pyg.geometry import BodySurface, load_mesh
 from swingar_pyg.geometry.spectral import DESCRIPTOR_SIGMA
+from swingar_pyg.inference.export import (
+    check_writers,
+    parse_formats,
+    write_obj,
+    write_pc2,
+    write_usd,
+)
 from swingar_pyg.inference.scene import Scene, compile_scene
 from swingar_pyg.inference.streaming import SwinGarStream
 from swingar_pyg.models import BodySDF, GarmentWindow, SwinGarEstimator
@@ -70,14 +78,6 @@ def _load_garment(source: str, body, shape):
     return garment_on_body(Path(source).stem, load_mesh(source), body, shape)
 
 
-def write_obj(path: Path, vertices: np.ndarray, faces: np.ndarray) -> None:
-    """A Wavefront OBJ of one frame, written atomically."""
-    lines = [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in vertices]
-    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in faces]
-    with atomic_path(path) as tmp:
-        tmp.write_text("\n".join(lines) + "\n")
-
-
 def inside_counts(before: torch.Tensor, after: torch.Tensor, posed, body_faces: torch.Tensor,
                   progress: bool = True) -> dict:
     """Garment vertices inside the posed body (exact SDF) before and after the
@@ -99,16 +99,25 @@ def predict_to_folder(estimator: SwinGarEstimator, garment: str, motion: str, ou
                       body_shape: list[float] | None = None, seconds: float | None = None,
                       preview: bool = True, progress: bool = True, collisions: bool = True,
                       body_sdf: BodySDF | None = None, data_settings: dict | None = None,
-                      checkpoint: str | None = None) -> dict:
+                      checkpoint: str | None = None,
+                      formats: str | Sequence[str] = ("obj",)) -> dict:
     """Animates ``garment`` (a mesh file or a shipped garment name) on ``motion``
     (a procedural family, a shipped clip or a ``.bvh`` path) and writes to
-    ``out``: ``frames/frame_0000.obj`` …, ``garment.npz`` (all frames, faces,
-    body shape), ``preview.gif`` and ``summary.json`` (with what each stage of
-    the :class:`~swingar_pyg.inference.scene.Scene` pipeline cost). With ``collisions``,
-    vertices inside the body are moved out: by the neural ``body_sdf`` if given,
-    else by the exact SDF. ``data_settings``: the descriptor's ``sigma`` and ``seed``
-    the estimator was trained with; ``checkpoint``: where it came from, for the
-    summary."""
+    ``out``: ``garment.npz`` (all frames, faces, body shape, fps), ``preview.gif``,
+    ``summary.json`` (with what each stage of the
+    :class:`~swingar_pyg.inference.scene.Scene` pipeline cost) and, per format of
+    ``formats`` (:mod:`swingar_pyg.inference.export`): ``obj``
+    ``frames/frame_0000.obj`` …; ``pc2`` ``garment.pc2`` and the rest mesh it
+    applies to, ``garment_rest.obj``; ``usd`` ``garment.usd``, the garment and the
+    posed body. With ``collisions``, vertices inside the body are moved out: by the
+    neural ``body_sdf`` if given, else by the exact SDF. ``data_settings``: the
+    descriptor's ``sigma`` and ``seed`` the estimator was trained with;
+    ``checkpoint``: where it came from, for the summary.
+
+    Unknown formats, or USD without ``usd-core``, fail before any work; every file
+    is written atomically."""
+    formats = parse_formats(formats)
+    check_writers(formats)
     data_settings = data_settings or {}
     body = AnnyBody()
     shape = body.default_shape() if body_shape is None else torch.tensor(body_shape)
@@ -132,8 +141,20 @@ def predict_to_folder(estimator: SwinGarEstimator, garment: str, motion: str, ou
                                             posed, body.faces, progress)}
     out = Path(out)
     faces = fitted.mesh.faces
-    for t, frame in enumerate(vertices):
-        write_obj(out / "frames" / f"frame_{t:04d}.obj", frame, faces)
+    exported = {}
+    if "obj" in formats:
+        for t, frame in enumerate(vertices):
+            write_obj(out / "frames" / f"frame_{t:04d}.obj", frame, faces)
+        exported["obj"] = ["frames/"]
+    if "pc2" in formats:
+        write_pc2(out / "garment.pc2", vertices)
+        write_obj(out / "garment_rest.obj", fitted.mesh.vertices, faces)
+        exported["pc2"] = ["garment.pc2", "garment_rest.obj"]
+    if "usd" in formats:
+        write_usd(out / "garment.usd", vertices, faces, clip.fps,
+                  body_frames=posed.vertices.numpy(), body_faces=body.faces.numpy(),
+                  garment_name=fitted.name)
+        exported["usd"] = ["garment.usd"]
     with atomic_path(out / "garment.npz") as tmp:
         with open(tmp, "wb") as handle:
             np.savez_compressed(handle, vertices=vertices, faces=faces,
@@ -143,7 +164,8 @@ def predict_to_folder(estimator: SwinGarEstimator, garment: str, motion: str, ou
                         vertices, faces, fps=clip.fps, title=f"{fitted.name} / {clip.name}")
     network = ("motion code", "skinning (E, P, LBS)", "detail (M_d)")
     summary = {"garment": fitted.name, "vertices": int(fitted.mesh.num_vertices),
-               "motion": clip.name, "frames": int(len(vertices)),
+               "motion": clip.name, "frames": int(len(vertices)), "fps": float(clip.fps),
+               "exported": exported,
                "estimator_ms_per_frame": 1e3 * sum(result.stage(n).seconds for n in network) /
                len(vertices), "checkpoint": checkpoint, "collisions": collision_counts,
                "stages": [dataclasses.asdict(stage) for stage in result.stages]}

@@ -34,6 +34,7 @@ from swingar_pyg.sim.collider import BodyCollider
 from swingar_pyg.sim.constraints import distance_constraints, stretch_pairs
 from swingar_pyg.sim.recording import FrameRecorder, SimulationResult, check_inputs
 from swingar_pyg.sim.xpbd import vertex_masses
+from swingar_pyg.verbosity import init_warp
 
 
 @dataclass(frozen=True)
@@ -89,13 +90,13 @@ class VBDSettings:
 
 
 def _import_newton():
+    init_warp()  # before newton initialises it: no start-up banner unless asked
     try:
         import newton
         import warp as wp
     except ImportError as error:
         raise ImportError("the VBD simulator needs NVIDIA's newton engine: "
                           "pip install 'swingar-pyg[newton]'") from error
-    wp.config.quiet = True
     return newton, wp
 
 

@@ -16,6 +16,8 @@ from typing import Protocol
 import torch
 from torch import Tensor
 
+from swingar_pyg.verbosity import init_warp
+
 
 @dataclass(frozen=True)
 class PosedBody:
@@ -81,7 +83,9 @@ class BodyModel(Protocol):
 @lru_cache(maxsize=None)
 def _anny_model(rig: str) -> torch.nn.Module:
     # The first build in a machine writes ~0.8 GB under ~/.cache/anny and takes
-    # about a minute; later builds read that cache in under a second.
+    # about a minute; later builds read that cache in under a second. Warp (anny's
+    # skinning) is initialised first, without its start-up banner unless asked.
+    init_warp()
     import anny
 
     return anny.Anny(rig=rig).to(torch.float32).eval()
