@@ -158,6 +158,31 @@ def test_prepared_attention_graph_agrees_and_batches():
                           atol=1e-6)
 
 
+@pytest.mark.parametrize('concat', [True, False])
+def test_fused_inference_aggregation_equals_message_passing(concat):
+    graphs = [sheet_graph(6, 7, 8, jitter=0.3), sheet_graph(4, 9, 8, seed=3)]
+    for graph in graphs:
+        graph.edge_index = attention_edge_index(graph.edge_index, graph.num_nodes)
+    batch = Batch.from_data_list(graphs)
+    fused = FCAConv(8, 5, heads=3, concat=concat, add_self_loops=False).double()
+    scattered = FCAConv(8, 5, heads=3, concat=concat, add_self_loops=False,
+                        fused_aggregation=False).double()
+    scattered.load_state_dict(fused.state_dict())
+    x = batch.x.double()
+    with torch.no_grad():
+        expected = scattered(x, batch.edge_index)
+        assert torch.allclose(fused(x, batch.edge_index), expected, rtol=1e-12, atol=1e-12)
+        alone = fused(graphs[1].x.double(), graphs[1].edge_index)
+        assert torch.allclose(alone, expected[batch.ptr[1]:], rtol=1e-12, atol=1e-12)
+    # With gradients the layer runs message passing, so autograd sees the same graph as before.
+    x.requires_grad_(True)
+    fused(x, batch.edge_index).square().sum().backward()
+    fused_grad = x.grad.clone()
+    x.grad = None
+    scattered(x, batch.edge_index).square().sum().backward()
+    assert torch.allclose(fused_grad, x.grad, rtol=1e-12, atol=1e-12)
+
+
 def test_large_alpha_falls_back_to_the_shifted_softmax():
     x = torch.randn(6, 5, dtype=torch.float64)
     conv = FCAConv(5, 4, heads=2, alpha=80.0).double()
