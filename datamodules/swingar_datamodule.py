@@ -103,8 +103,10 @@ class SwinGarDataModule(L.LightningDataModule):
         return GraphLoader(self.datasets[split], shuffle=False, **self._loader_options())
 
     def train_dataloader(self) -> DataLoader:
+        trainer = self.trainer  # None outside a Trainer
+        replicas, rank = (trainer.world_size, trainer.global_rank) if trainer else (1, 0)
         return ResumableGraphLoader(self.datasets["train"], seed=self.hparams.seed,
-                                    **self._loader_options())
+                                    num_replicas=replicas, rank=rank, **self._loader_options())
 
     def val_dataloader(self) -> DataLoader:
         return self._loader("val")

@@ -1,6 +1,9 @@
 import json
 import os
 import shutil
+import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 import torch
@@ -80,6 +83,58 @@ def test_cli_fits_from_the_quickstart_config_and_resumes(tiny_windows, tmp_path)
     assert not torch.equal(saved['optimizer_states'][0]['state'][0][moment],
                            resumed['optimizer_states'][0]['state'][0][moment])
 
+
+
+def _fit_in_processes(tiny_windows, root: Path, devices: int, steps: int, *extra: str) -> Path:
+    """`swingar fit` in a subprocess (DDP starts one more per device), recording
+    the windows each process trains on; returns the last checkpoint."""
+    args = _small_fit_args(tiny_windows, root)
+    args[args.index('--trainer.max_steps') + 1] = str(steps)
+    probe = {'class_path': 'tests.ddp_probe.RecordWindows', 'init_args': {'folder': str(root)}}
+    command = [sys.executable, '-m', 'swingar_pyg.cli', 'fit', *args,
+               '--trainer.accelerator', 'cpu', '--trainer.devices', str(devices),
+               '--trainer.strategy', 'ddp' if devices > 1 else 'auto',
+               f'--trainer.callbacks+={json.dumps(probe)}', *extra]
+    subprocess.run(command, check=True, cwd=Path(__file__).resolve().parents[1], timeout=900,
+                   env={**os.environ, 'OMP_NUM_THREADS': '1'})
+    return root / 'checkpoints' / 'last.ckpt'
+
+
+def _windows_by_step(root: Path, rank: int) -> dict[int, list[str]]:
+    lines = (root / f'rank{rank}.jsonl').read_text().splitlines()
+    return {record['step']: record['windows'] for record in map(json.loads, lines)}
+
+
+@pytest.mark.filterwarnings('ignore:Checkpoint directory .* exists and is not empty')
+def test_ddp_on_two_processes_shards_the_data_checkpoints_and_resumes(tiny_windows, tmp_path):
+    from datamodules.resumable_loader import EpochPermutation
+
+    single = _fit_in_processes(tiny_windows, tmp_path / 'single', 1, 4)
+    parallel = _fit_in_processes(tiny_windows, tmp_path / 'ddp', 2, 4)
+    # Each process trains on its own half: no window twice within the epoch's first steps.
+    seen = [_windows_by_step(tmp_path / 'ddp', rank) for rank in (0, 1)]
+    assert sorted(seen[0]) == sorted(seen[1]) == [0, 1, 2, 3]
+    halves = [{w for windows in by_step.values() for w in windows} for by_step in seen]
+    assert len(halves[0]) == len(halves[1]) == 4 * 2 and not halves[0] & halves[1]
+    # ... and exactly the shard of the seeded order that its rank owns.
+    dataset = tiny_windows.datasets['train']
+    names = [f'{dataset.sequences[s].id}:{t}' for s, t in dataset.windows]
+    for rank in (0, 1):
+        shard = [names[i] for i in EpochPermutation(dataset, seed=0, num_replicas=2, rank=rank)]
+        assert [w for step in range(4) for w in seen[rank][step]] == shard[:8]
+    # The checkpoint has the single-process run's structure.
+    one, two = (torch.load(path, weights_only=False) for path in (single, parallel))
+    assert one['global_step'] == two['global_step'] == 4
+    assert {k: v.shape for k, v in one['state_dict'].items()} == \
+        {k: v.shape for k, v in two['state_dict'].items()}
+    assert one['hyper_parameters'] == two['hyper_parameters']
+    # Resuming on two processes continues each shard where it stopped.
+    resumed = _fit_in_processes(tiny_windows, tmp_path / 'ddp', 2, 6, '--ckpt_path', str(parallel))
+    assert torch.load(resumed, weights_only=False)['global_step'] == 6
+    for rank in (0, 1):
+        shard = [names[i] for i in EpochPermutation(dataset, seed=0, num_replicas=2, rank=rank)]
+        after = _windows_by_step(tmp_path / 'ddp', rank)
+        assert [w for step in (4, 5) for w in after[step]] == shard[8:12]
 
 def test_checkpoint_round_trip_gives_identical_predictions(tiny_windows, tmp_path):
     from swingar_pyg.training import SwinGarModule
