@@ -126,7 +126,7 @@ class GarmentWindowDataset(Dataset):
             rigid=sequence.rigid[frames].transpose(0, 1),
             body_shape=sequence.body_shape[None],
             pose_history=torch.stack(features)[None], history_mask=torch.stack(masks)[None],
-            frame_rotation=rotation[-1][None], frame_origin=origin[-1][None],
+            frame_rotation=torch.stack(rotation)[None], frame_origin=torch.stack(origin)[None],
             joint_transforms=sequence.joint_transforms[frames][None],
             joint_positions=sequence.joint_positions[frames][None],
             garment=sequence.garment, motion=sequence.motion, sequence=sequence.id, frame=t,

@@ -110,6 +110,18 @@ def test_stream_equals_the_windowed_estimator(tiny_windows, detail):
             assert torch.allclose(streamed, windowed, atol=1e-5), t
 
 
+
+def test_compiled_stream_equals_the_eager_stream(tiny_windows):
+    dataset = tiny_windows.datasets['test']
+    sequence = dataset.sequences[0]
+    model = trained_like()
+    eager = SwinGarStream(model, dataset[0], sequence.body_shape, sequence.fps)
+    compiled = SwinGarStream(model, dataset[0], sequence.body_shape, sequence.fps, compile=True)
+    for t in range(5):
+        frame = (sequence.rotations[t], sequence.translation[t], sequence.joint_transforms[t],
+                 sequence.joint_positions[t])
+        assert torch.allclose(compiled.step(*frame), eager.step(*frame), atol=1e-5), t
+
 def test_estimator_is_equivariant_to_turning_the_motion(tiny_windows):
     """Turn and move the motion on the floor (only the root's rotation changes,
     joints turn relative to their parents): the garment turns and moves with it."""
@@ -126,7 +138,8 @@ def test_estimator_is_equivariant_to_turning_the_motion(tiny_windows):
     windows = [pose_window(rotations, translation, sequence.fps, k, 8) for k in frames]
     turned = copy.copy(window)
     turned.pose_history = torch.stack([w[0] for w in windows])[None]
-    turned.frame_rotation, turned.frame_origin = windows[-1][2][None], windows[-1][3][None]
+    turned.frame_rotation = torch.stack([w[2] for w in windows])[None]
+    turned.frame_origin = torch.stack([w[3] for w in windows])[None]
     turned.joint_transforms = turn @ window.joint_transforms
     turned.joint_positions = window.joint_positions @ turn[:3, :3].T + turn[:3, 3]
     model = trained_like()

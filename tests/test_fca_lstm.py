@@ -69,6 +69,23 @@ def test_sequence_of_tensors_and_initial_state():
     assert torch.allclose(end_state[1], state[1], atol=1e-6)
 
 
+
+def test_cached_input_terms_give_the_same_windows():
+    """A stream computes each frame's input terms once and reruns only the
+    recurrence over a sliding window: that equals running every window anew."""
+    graph = sheet_graph(4, 5, 3)
+    lstm = FCALSTM(3, 6, add_self_loops=False).double()
+    edge_index, _ = add_self_loops(graph.edge_index, num_nodes=graph.num_nodes)
+    frames = torch.randn(6, graph.num_nodes, 3, dtype=torch.float64)
+    terms = [lstm.input_terms(x, edge_index) for x in frames]
+    for end in range(3, 7):
+        state = None
+        for input_terms in terms[end - 3:end]:
+            state = lstm.step_from_input_terms(input_terms, edge_index, state)
+        _, expected = lstm(frames[end - 3:end], edge_index)
+        assert torch.allclose(state[0], expected[0], atol=1e-12)
+        assert torch.allclose(state[1], expected[1], atol=1e-12)
+
 def test_bad_input_shape_raises():
     lstm = FCALSTM(3, 4)
     with pytest.raises(ValueError, match=r"shape \(T, N, F\)"):

@@ -19,7 +19,6 @@ from dataclasses import dataclass, field, replace
 from importlib import metadata
 from pathlib import Path
 
-import numpy as np
 import torch
 
 from swingar_pyg.collision import NeuralCollisions
@@ -34,15 +33,12 @@ from swingar_pyg.eval.error_vs_time import (
 )
 from swingar_pyg.eval.report_writer import write_report
 from swingar_pyg.eval.stability import FULL, SMALL, run_stability
+from swingar_pyg.eval.stream_speed import stream_speed
 from swingar_pyg.geometry.spectral import DESCRIPTOR_SIGMA
-from swingar_pyg.inference import SwinGarStream
-from swingar_pyg.inference.prediction import garment_graph
 from swingar_pyg.training import load_body_sdf, load_estimator
 from swingar_pyg.training.cli import build_cli
 from swingar_pyg.world.body import AnnyBody
 from swingar_pyg.world.dataset import DatasetConfig, make_dataset
-from swingar_pyg.world.motion_library import make_motion
-from swingar_pyg.world.skirt import SkirtSpec, fit_procedural_skirt
 
 
 @dataclass(frozen=True)
@@ -71,6 +67,7 @@ class ReportConfig:
     second_simulator: tuple[int, int] | None = None
     streaming_vertices: tuple[int, ...] = (1000, 5000, 20000)
     streaming_frames: int = 60
+    streaming_compile: bool = False
     stability: str = "full"
     extra_tests: dict = field(default_factory=dict)
     test_sequences: int | None = None
@@ -100,6 +97,7 @@ class ReportConfig:
                                   else None),
                 streaming_vertices=tuple(streaming.get("vertices", cls.streaming_vertices)),
                 streaming_frames=int(streaming.get("frames", cls.streaming_frames)),
+                streaming_compile=bool(streaming.get("compile", cls.streaming_compile)),
                 stability=str(raw.get("stability", "full")),
                 extra_tests=dict(raw.get("extra_tests", {})),
                 test_sequences=raw.get("test_sequences"))
@@ -220,26 +218,6 @@ def _test_split(dataset: str) -> Path:
     return path
 
 
-def _streaming_fps(estimator, body, vertices: tuple[int, ...], frames: int) -> list[dict]:
-    shape = body.default_shape()
-    motion = make_motion("walk", body, shape, seconds=frames / 30.0)
-    posed = body.pose(shape, motion.rotations, motion.translation)
-    rows = []
-    for count in vertices:
-        skirt = fit_procedural_skirt(SkirtSpec(length=0.8, vertices=count), body, shape)
-        graph = garment_graph(skirt, len(body.joint_names), estimator.descriptor_size)
-        stream = SwinGarStream(estimator, graph, shape, motion.fps)
-        seconds = []
-        for t in range(motion.num_frames):
-            start = time.perf_counter()
-            stream.step(motion.rotations[t], motion.translation[t], posed.joint_transforms[t],
-                        posed.joint_positions[t])
-            seconds.append(time.perf_counter() - start)
-        ms = 1e3 * float(np.median(seconds[1:]))
-        rows.append({"vertices": skirt.mesh.num_vertices, "ms_per_frame": ms, "fps": 1e3 / ms})
-    return rows
-
-
 def run_report(config: ReportConfig, progress: bool = True, log=print) -> Path:
     """Measures everything the config asks for and writes the report folder;
     returns the path of ``report.md``."""
@@ -293,8 +271,12 @@ def run_report(config: ReportConfig, progress: bool = True, log=print) -> Path:
     if config.second_simulator:
         log("second simulator")
         second = evaluate_second_simulator(chosen, *config.second_simulator, body)
-    streaming = (_streaming_fps(first_estimator, body, config.streaming_vertices,
-                                config.streaming_frames) if first_estimator else [])
+    streaming = []
+    for compile in (False, True) if config.streaming_compile else (False,):
+        if first_estimator is not None:
+            log("streaming speed" + (", compiled" if compile else ""))
+            streaming += stream_speed(first_estimator, body, config.streaming_vertices,
+                                      config.streaming_frames, compile=compile)
     extra = {}
     for name, dataset in config.extra_tests.items():
         log(f"extra test: {name}")

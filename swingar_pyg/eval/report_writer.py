@@ -146,13 +146,17 @@ def plot_distributions(results, rigid):
 
 def plot_streaming(streaming):
     figure, axis = _figure((5.5, 4))
-    axis.plot([r["vertices"] for r in streaming], [r["fps"] for r in streaming], "o-")
-    for r in streaming:
-        axis.annotate(f"{r['fps']:.1f} fps", (r["vertices"], r["fps"]), fontsize=7,
-                      xytext=(3, 3), textcoords="offset points")
+    for compiled in sorted({r["compiled"] for r in streaming}):
+        rows = [r for r in streaming if r["compiled"] == compiled]
+        axis.plot([r["vertices"] for r in rows], [r["fps"] for r in rows], "o-",
+                  label="torch.compile" if compiled else "eager")
+        for r in rows:
+            axis.annotate(f"{r['fps']:.1f} fps", (r["vertices"], r["fps"]), fontsize=7,
+                          xytext=(3, 3), textcoords="offset points")
     axis.set(xscale="log", yscale="log", xlabel="garment vertices",
              ylabel="frames per second (streaming, one thread)", title="streaming speed")
     axis.grid(alpha=0.3, which="both")
+    axis.legend(fontsize=7)
     figure.tight_layout()
     return figure
 
@@ -293,9 +297,15 @@ def write_report(out: Path, config, *, machine, test_path, sequences, results, p
               "several). Per-vertex error distributions:", "",
               "![distributions](distributions.png)", ""]
     if streaming:
+        stages = [k for k in streaming[0] if k.startswith("ms ")]
         lines += ["## Streaming speed", "", "![streaming](streaming.png)", "",
-                  "| vertices | ms per frame | fps |", "|---|---|---|"]
-        lines += [f"| {r['vertices']} | {r['ms_per_frame']:.1f} | {r['fps']:.1f} |"
+                  "Median per frame after warm-up (`swingar_pyg.eval.stream_speed`).", "",
+                  "| vertices | compiled | ms per frame | fps | " +
+                  " | ".join(f"{k[3:]} ms" for k in stages) + " |",
+                  "|---" * (4 + len(stages)) + "|"]
+        lines += [f"| {r['vertices']} | {'yes' if r['compiled'] else 'no'} | "
+                  f"{r['ms_per_frame']:.1f} | {r['fps']:.1f} | " +
+                  " | ".join(f"{r.get(k, 0.0):.2f}" for k in stages) + " |"
                   for r in streaming]
         lines.append("")
     for name, rows_ in extra.items():

@@ -1,12 +1,15 @@
 """Streaming inference: one new body pose in, the garment at that frame out.
 
 The stream caches what does not change (the garment encoding :math:`M_g`, the
-shape code, the attention graph), the last ``m + 1`` poses and, per recent
-frame, the skinned garment :math:`\\mathbf{M}_c`, the joint positions and the
-body code. A new frame therefore runs the motion encoder over its pose window,
-:math:`E`, :math:`P` and skinning once, and :math:`M_d` over the three cached
-graphs; its output equals the estimator's on the same window (frame 0 is
-repeated before the second frame, as in training).
+shape code, the attention graph), the last ``m + 1`` poses and the input terms
+of :math:`M_d` for the last three frames (each frame's input to :math:`M_d` is
+in its own canonical frame, so it is the same in every window). A new frame runs
+the motion encoder over its pose window, :math:`E`, :math:`P` and skinning once,
+the input maps of :math:`M_d` on that frame, and the recurrence over the three
+cached terms: three FCA maps where re-running the window would take six (the
+first step starts from the zero state, whose state maps vanish). Its output
+equals the estimator's on the same window (frame 0 is repeated before the second
+frame, as in training).
 """
 
 from __future__ import annotations
@@ -37,10 +40,13 @@ class SwinGarStream:
             LBS)"``, ``"detail (M_d)"``), returns a context manager around that
             stage of each step that yields a function taking the stage's output
             tensors (:class:`~swingar_pyg.inference.scene.StageTimer`).
+        compile: run the per-frame garment work through :func:`torch.compile`
+            (shapes fixed by the garment). Compiling takes tens of seconds once,
+            then each frame costs about half; it pays on long or live streams.
     """
 
     def __init__(self, estimator: SwinGarEstimator, garment, body_shape: Tensor, fps: float,
-                 timer: Callable[[str], ContextManager] | None = None):
+                 timer: Callable[[str], ContextManager] | None = None, compile: bool = False):
         if not fps > 0:
             raise ValueError(f"fps must be positive, got {fps}")
         self.estimator = estimator.eval()
@@ -52,10 +58,16 @@ class SwinGarStream:
         self.body_shape = body_shape.reshape(1, -1).to(garment.rest)
         history = estimator.history
         with torch.no_grad():
-            self.edge_index, self.features, self.shape_code = estimator.encode_garment(garment)
+            edge_index, self.features, self.shape_code = estimator.encode_garment(garment)
+        # EdgeIndex does not trace; compiled code gets the plain tensor.
+        self.edge_index = edge_index.as_tensor() if compile else edge_index
         self._rotations: deque[Tensor] = deque(maxlen=history + 1)
         self._translations: deque[Tensor] = deque(maxlen=history + 1)
-        self._recent: deque[tuple[Tensor, Tensor, Tensor]] = deque(maxlen=TARGET_FRAMES)
+        self._input_terms: deque[Tensor] = deque(maxlen=TARGET_FRAMES)
+        stages = (self._skin, self._detail_input_terms, self._refine)
+        if compile:
+            stages = tuple(torch.compile(stage, dynamic=False) for stage in stages)
+        self._skin_stage, self._input_terms_stage, self._refine_stage = stages
 
     @torch.no_grad()
     def step(self, rotations: Tensor, translation: Tensor, joint_transforms: Tensor,
@@ -80,22 +92,42 @@ class SwinGarStream:
             motion = model.motion_codes(windows, masks)[:, 0]
             record(motion)
         with self._timer("skinning (E, P, LBS)") as record:
-            transforms = joint_transforms.to(features)[None].expand(self.graphs, -1, -1, -1)
-            skinned = model.skin(self.garment, self.edge_index, self.features, self.shape_code,
-                                 motion, transforms)
+            skinned = self._skin_stage(motion, joint_transforms.to(features))
             record(skinned)
         if model.detail is None:
             return skinned
         with self._timer("detail (M_d)") as record:
-            code = model.body_codes(self.body_shape.expand(self.graphs, -1), windows)[:, 0]
-            self._recent.append((skinned, joint_positions.to(features), code))
-            frames = list(self._recent)
-            frames = [frames[0]] * (TARGET_FRAMES - len(frames)) + frames
-            stacked_skinned = torch.stack([f[0] for f in frames])
-            joints = torch.stack([f[1] for f in frames])[None].expand(self.graphs, -1, -1, -1)
-            codes = torch.stack([f[2] for f in frames], dim=1)
-            refined = model.refine(self.edge_index, self.batch, stacked_skinned, joints, codes,
-                                   frame_rotation[None].expand(self.graphs, -1, -1),
-                                   frame_origin[None].expand(self.graphs, -1))
+            body_code = model.body_codes(self.body_shape.expand(self.graphs, -1),
+                                         windows)[:, 0]
+            self._input_terms.append(self._input_terms_stage(
+                skinned, joint_positions.to(features), frame_rotation, frame_origin))
+            terms = list(self._input_terms)
+            terms = [terms[0]] * (TARGET_FRAMES - len(terms)) + terms
+            refined = self._refine_stage(*terms, skinned, body_code, frame_rotation)
             record(refined)
-        return refined[-1]
+        return refined
+
+    def _skin(self, motion: Tensor, joint_transforms: Tensor) -> Tensor:
+        transforms = joint_transforms[None].expand(self.graphs, -1, -1, -1)
+        return self.estimator.skin(self.garment, self.edge_index, self.features,
+                                   self.shape_code, motion, transforms)
+
+    def _detail_input_terms(self, skinned: Tensor, joint_positions: Tensor,
+                            frame_rotation: Tensor, frame_origin: Tensor) -> Tensor:
+        inputs = self.estimator.detail_inputs(
+            skinned, joint_positions[None].expand(self.graphs, -1, -1),
+            frame_rotation[None].expand(self.graphs, -1, -1),
+            frame_origin[None].expand(self.graphs, -1), self.batch)
+        return self.estimator.detail.input_terms(inputs, self.edge_index)
+
+    def _refine(self, terms_before_last: Tensor, terms_last: Tensor, terms_now: Tensor,
+                skinned: Tensor, body_code: Tensor, frame_rotation: Tensor) -> Tensor:
+        """The recurrence over the input terms of frames ``t-2, t-1, t`` from
+        the zero state, then the correction of frame ``t``."""
+        detail = self.estimator.detail
+        state = detail.step_from_input_terms(terms_before_last, self.edge_index)
+        state = detail.step_from_input_terms(terms_last, self.edge_index, state)
+        state = detail.step_from_input_terms(terms_now, self.edge_index, state)
+        return self.estimator.correct(skinned, state[0], body_code,
+                                      frame_rotation[None].expand(self.graphs, -1, -1),
+                                      self.batch)

@@ -28,8 +28,9 @@ transferred from the body (``skinning_prior``), and the last layers of both
 heads and of the correction start at zero, so an untrained estimator is exactly
 rigid skinning with transferred weights and training starts from that baseline.
 Positions fed to :math:`M_d` and its correction are in the canonical frame
-(:mod:`~swingar_pyg.models.pose_features`) of frame ``t``, so the correction
-turns with the body.
+(:mod:`~swingar_pyg.models.pose_features`) of their own frame, so the correction
+turns with the body and a frame's input to :math:`M_d` is the same in every window
+that contains it (a stream computes it once, :class:`~swingar_pyg.inference.SwinGarStream`).
 """
 
 from __future__ import annotations
@@ -61,14 +62,21 @@ def _mlp(in_channels: int, channels: int) -> nn.Sequential:
                          nn.Linear(channels, channels))
 
 
-def skin_points(rest: Tensor, weights: Tensor, transforms: Tensor) -> Tensor:
-    r"""Dense linear blend skinning of points that each have their own
-    transforms: :math:`\sum_j w_{ij} \mathbf{G}_{ij} [\mathbf{x}_i; 1]`.
+def skin_points(rest: Tensor, weights: Tensor, transforms: Tensor, batch: Tensor) -> Tensor:
+    r"""Dense linear blend skinning of the points of ``G`` garments, each on its
+    own posed body: :math:`\sum_j w_{ij} \mathbf{G}_{g(i),j} [\mathbf{x}_i; 1]`.
+
+    The weights meet each body's transforms in one ``(N, J) @ (J, 12 G)`` product;
+    per-point ``(N, J, 4, 4)`` transforms are never gathered.
 
     Args:
-        rest: ``(N, 3)``; weights: ``(N, J)``; transforms: ``(N, J, 4, 4)``.
+        rest: ``(N, 3)``; weights: ``(N, J)``; transforms: ``(G, J, 4, 4)``;
+        batch: ``(N,)`` the garment of each point.
     """
-    blended = torch.einsum("nj,njab->nab", weights, transforms[..., :3, :])
+    graphs, joints = transforms.shape[:2]
+    rows = transforms[..., :3, :].permute(1, 0, 2, 3).reshape(joints, graphs * 12)
+    blended = (weights @ rows).view(-1, graphs, 3, 4)
+    blended = blended[torch.arange(len(batch), device=batch.device), batch]
     return (blended[..., :3] @ rest.unsqueeze(-1)).squeeze(-1) + blended[..., 3]
 
 
@@ -184,22 +192,41 @@ class SwinGarEstimator(nn.Module):
         if self.skinning_prior:
             logits = logits + torch.log(data.prior_weights.clamp_min(_PRIOR_FLOOR))
         weights = torch.softmax(logits, dim=-1)
-        return skin_points(data.rest + self.blend_head(hidden), weights, transforms[batch])
+        return skin_points(data.rest + self.blend_head(hidden), weights, transforms, batch)
+
+    def detail_inputs(self, skinned: Tensor, joint_positions: Tensor, frame_rotation: Tensor,
+                      frame_origin: Tensor, batch: Tensor) -> Tensor:
+        r"""The node features of :math:`M_d` at one frame, ``(N, 3 + J)``: the
+        skinned positions ``(N, 3)`` in that frame's canonical frame
+        (:math:`\mathbf{R}_c^\top (\mathbf{x} - \mathbf{p})`, per garment
+        ``(G, 3, 3)`` and ``(G, 3)``) and their distances to the joints ``(G, J, 3)``.
+        They depend on that frame alone, so a stream computes them once."""
+        local = torch.einsum("nba,nb->na", frame_rotation[batch], skinned - frame_origin[batch])
+        distances = (skinned.unsqueeze(1) - joint_positions[batch]).norm(dim=-1)
+        return torch.cat([local, distances], dim=-1)
+
+    def correct(self, skinned: Tensor, hidden: Tensor, body_code: Tensor,
+                frame_rotation: Tensor, batch: Tensor) -> Tensor:
+        r"""Adds :math:`\mathbf{R}_c\, \mathrm{Linear}(\mathbf{h} \odot
+        \mathbf{c}_b)` to ``skinned`` ``(N, 3)`` at one frame, given the detail
+        state ``(N, C)``, per garment the body code ``(G, C)`` and the frame's
+        canonical rotation ``(G, 3, 3)``."""
+        correction = self.correction(hidden * body_code[batch])
+        return skinned + torch.einsum("nab,nb->na", frame_rotation[batch], correction)
 
     def refine(self, edge_index: Tensor, batch: Tensor, skinned: Tensor,
                joint_positions: Tensor, body_codes: Tensor, frame_rotation: Tensor,
                frame_origin: Tensor) -> Tensor:
         r""":math:`M_d`: adds the detail correction to ``skinned`` ``(F, N, 3)``,
-        given per garment the joint positions ``(G, F, J, 3)``, body codes
-        ``(G, F, C)`` and the canonical frame of the last frame, ``(G, 3, 3)``
-        and ``(G, 3)``."""
-        rotation, origin = frame_rotation[batch], frame_origin[batch]
-        local = torch.einsum("nba,fnb->fna", rotation, skinned - origin)
-        joints = joint_positions[batch].transpose(0, 1)  # (F, N, J, 3)
-        distances = (skinned.unsqueeze(2) - joints).norm(dim=-1)
-        hidden, _ = self.detail(torch.cat([local, distances], dim=-1), edge_index)
-        correction = self.correction(hidden * body_codes[batch].transpose(0, 1))
-        return skinned + torch.einsum("nab,fnb->fna", rotation, correction)
+        given per garment and frame the joint positions ``(G, F, J, 3)``, body
+        codes ``(G, F, C)`` and canonical frames ``(G, F, 3, 3)``, ``(G, F, 3)``."""
+        inputs = torch.stack([
+            self.detail_inputs(skinned[k], joint_positions[:, k], frame_rotation[:, k],
+                               frame_origin[:, k], batch) for k in range(len(skinned))])
+        hidden, _ = self.detail(inputs, edge_index)
+        return torch.stack([
+            self.correct(skinned[k], hidden[k], body_codes[:, k], frame_rotation[:, k], batch)
+            for k in range(len(skinned))])
 
     def forward(self, data) -> EstimatorOutput:
         _check_window(data, self.num_joints, self.history)

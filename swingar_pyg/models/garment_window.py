@@ -37,8 +37,8 @@ class GarmentWindow(Data):
       ``body_shape`` ``(1, S)``.
     - ``pose_history`` ``(1, 3, m, F)`` and ``history_mask`` ``(1, 3, m)``: for
       each target frame its own pose window (:func:`pose_window`).
-    - ``frame_rotation`` ``(1, 3, 3)``, ``frame_origin`` ``(1, 3)``: the
-      canonical frame of the last target frame ``t``.
+    - ``frame_rotation`` ``(1, 3, 3, 3)``, ``frame_origin`` ``(1, 3, 3)``: the
+      canonical frame of each target frame.
     - ``joint_transforms`` ``(1, 3, J, 4, 4)`` skinning transforms and
       ``joint_positions`` ``(1, 3, J, 3)`` of the three frames.
     - Optional, for the collision loss: ``body_points``, ``body_normals``

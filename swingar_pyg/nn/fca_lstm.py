@@ -104,25 +104,46 @@ class FCALSTM(Module):
         if self.add_self_loops:
             edge_index, _ = add_remaining_self_loops(edge_index,
                                                      num_nodes=num_nodes)
-        if state is None:
-            zero = steps.new_zeros(num_nodes, self.hidden_channels)
-            state = (zero, zero)
-        h, c = state
+        h_c: Optional[LSTMState] = state
         outputs = []
         for x_t in steps:
-            h, c = self.step(x_t, edge_index, (h, c))
-            outputs.append(h)
-        return torch.stack(outputs), (h, c)
+            h_c = self.step_from_input_terms(self.input_terms(x_t, edge_index),
+                                             edge_index, h_c)
+            outputs.append(h_c[0])
+        assert h_c is not None
+        return torch.stack(outputs), h_c
+
+    def input_terms(self, x: Tensor, edge_index: Tensor) -> Tensor:
+        r"""The input maps of one step, :math:`[\mathcal{F}_{xi}(\mathbf{X}_t)
+        \Vert \dots \Vert \mathcal{F}_{xo}(\mathbf{X}_t)] + \mathbf{b}`,
+        :math:`(|\mathcal{V}|, 4 F_{hid})`. They depend on :math:`\mathbf{X}_t`
+        alone, so a stream that sees each input in several windows computes
+        them once."""
+        return self.input_maps(x, edge_index)
 
     def step(self, x: Tensor, edge_index: Tensor,
-             state: LSTMState) -> LSTMState:
+             state: Optional[LSTMState] = None) -> LSTMState:
         r"""One LSTM step on a graph whose self-loops are already in
-        :obj:`edge_index`; returns :math:`(\mathbf{H}_t, \mathbf{C}_t)`."""
-        h, c = state
-        pre = (self.input_maps(x, edge_index) +
-               self.state_maps(h, edge_index)).view(-1, len(_GATES),
-                                                    self.hidden_channels)
-        pre_i, pre_f, pre_c, pre_o = pre.unbind(dim=1)
+        :obj:`edge_index`; returns :math:`(\mathbf{H}_t, \mathbf{C}_t)`.
+        :obj:`None` is the zero state."""
+        return self.step_from_input_terms(self.input_terms(x, edge_index),
+                                          edge_index, state)
+
+    def step_from_input_terms(self, input_terms: Tensor, edge_index: Tensor,
+                              state: Optional[LSTMState] = None) -> LSTMState:
+        r""":meth:`step` given the step's :meth:`input_terms`. From the zero
+        state (:obj:`None`) the state maps are skipped: without a bias they map
+        zero to zero."""
+        pre = input_terms
+        if state is None:
+            zero = input_terms.new_zeros(input_terms.size(0),
+                                         self.hidden_channels)
+            h, c = zero, zero
+        else:
+            h, c = state
+            pre = pre + self.state_maps(h, edge_index)
+        pre_i, pre_f, pre_c, pre_o = pre.view(
+            -1, len(_GATES), self.hidden_channels).unbind(dim=1)
         w_i, w_f, w_o = self.peephole.unbind(dim=0)
         i = torch.sigmoid(pre_i + w_i * c)
         f = torch.sigmoid(pre_f + w_f * c)
