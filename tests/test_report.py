@@ -36,7 +36,7 @@ models:
   - name: tiny estimator
     configs: [configs/quickstart.yaml, {root}/training.yaml]
     collisions: [none, exact, neural]
-precisions: [fp32, bf16]
+precisions: [fp32, bf16, fp32-compiled]
 train_missing: true
 simulator: {{settings: [[5, 2], [10, 2], [5, 2, 20]], sequences: 1{second}}}
 streaming: {{vertices: [150], frames: 4}}
@@ -80,12 +80,15 @@ def test_report_measures_every_method_on_the_same_sequences(tiny_windows, tiny_b
         assert (report.parent / name).exists(), name
     rows = list(csv.DictReader((report.parent / 'error_vs_time.csv').read_text().splitlines()))
     methods = [row['method'] for row in rows]
-    assert methods == ['tiny estimator', 'tiny estimator bf16',
+    assert methods == ['tiny estimator', 'tiny estimator bf16', 'tiny estimator fp32-compiled',
                        'tiny estimator + exact collisions', 'tiny estimator + neural collisions',
                        'rigid skinning', 'simulator 5x2', 'simulator 10x2',
                        'simulator 5x2:20'] + (
                            ['VBD simulator 2x2 (newton)'] if has_newton else [])
     by_method = {row['method']: row for row in rows}
+    # the compiled stream computes what the eager one does
+    assert float(by_method['tiny estimator fp32-compiled']['mean_mm']) == pytest.approx(
+        float(by_method['tiny estimator']['mean_mm']), abs=1e-3)
     # the exact pass leaves nothing inside (the network only tries to)
     assert float(by_method['tiny estimator + exact collisions']['inside_percent']) == 0.0
     # rigid skinning, re-skinned here, against the rigid garment the simulator stored

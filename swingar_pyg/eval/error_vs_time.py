@@ -120,29 +120,49 @@ def evaluate_rigid(sequences: list[TestSequence]) -> MethodResult:
     return MethodResult("rigid skinning", "rigid", errors, seconds)
 
 
+def _warm_up(estimator, graph, sequence: TestSequence, device: torch.device) -> None:
+    """Streams a sequence's first frames once with ``compile=True``: compiled code
+    is cached by shape, so the timed stream of the same garment starts compiled."""
+    stream = SwinGarStream(estimator, graph, sequence.body_shape.to(device), sequence.motion.fps,
+                           compile=True)
+    for t in range(min(3, len(sequence.truth))):
+        stream.step(sequence.motion.rotations[t].to(device),
+                    sequence.motion.translation[t].to(device),
+                    sequence.posed.joint_transforms[t].to(device),
+                    sequence.posed.joint_positions[t].to(device))
+
+
 def evaluate_estimator(name: str, estimator, sequences: list[TestSequence],
                        sigma: float = DESCRIPTOR_SIGMA, seed: int = 0, precision: str = "fp32",
                        collisions=None, body=None) -> MethodResult:
     """The estimator streamed over each sequence, one frame at a time.
 
     Args:
-        precision: ``"fp32"`` or ``"bf16"`` (CPU/GPU autocast).
+        precision: ``"fp32"``, ``"bf16"`` (CPU/GPU autocast) or ``"fp32-compiled"``
+            (:class:`SwinGarStream` with ``compile=True``; each garment's first frames
+            run once untimed, which compiles, and ``compile_seconds`` records them).
         collisions: ``None``, ``"exact"`` (exact SDF) or a
             :class:`~swingar_pyg.collision.NeuralCollisions` factory
             ``shape -> handler``; its time is included, and the share of
             vertices inside the body after it (exact SDF) is recorded.
     """
-    if precision not in ("fp32", "bf16"):
-        raise ValueError(f"precision must be fp32 or bf16, got {precision!r}")
+    if precision not in ("fp32", "bf16", "fp32-compiled"):
+        raise ValueError(f"precision must be fp32, bf16 or fp32-compiled, got {precision!r}")
+    compile = precision == "fp32-compiled"
     estimator = estimator.eval()
-    errors, seconds, inside, total = {}, [], 0, 0
+    errors, seconds, inside, total, compile_seconds = {}, [], 0, 0, 0.0
     device = next(estimator.parameters()).device
     for s in sequences:
         graph = garment_graph(s.garment, len(s.motion.joint_names), estimator.descriptor_size,
                               sigma=sigma, seed=seed).to(device)
         edges = mesh_edge_index(s.garment.mesh)
         handler = collisions(s.body_shape) if callable(collisions) else None
-        stream = SwinGarStream(estimator, graph, s.body_shape.to(device), s.motion.fps)
+        if compile:
+            start = time.perf_counter()
+            _warm_up(estimator, graph, s, device)
+            compile_seconds += time.perf_counter() - start
+        stream = SwinGarStream(estimator, graph, s.body_shape.to(device), s.motion.fps,
+                               compile=compile)
         frames = []
         for t in range(len(s.truth)):
             start = time.perf_counter()
@@ -168,6 +188,8 @@ def evaluate_estimator(name: str, estimator, sequences: list[TestSequence],
                 inside += int((surface.signed_distance(predicted[t].double().numpy())[0] > 0).sum())
                 total += predicted.shape[1]
     extra = {"precision": precision}
+    if compile:
+        extra["compile_seconds"] = compile_seconds
     if collisions is not None:
         extra["inside_percent"] = 100.0 * inside / max(total, 1)
     return MethodResult(name, "estimator", errors, seconds, extra)

@@ -117,6 +117,10 @@ class ReportConfig:
             if len(setting) not in (2, 3):
                 raise ValueError(f"{path}: a simulator setting is [substeps, iterations] or "
                                  f"[substeps, iterations, max_substeps], got {list(setting)}")
+        unknown = set(config.precisions) - {"fp32", "bf16", "fp32-compiled"}
+        if unknown:
+            raise ValueError(f"{path}: precisions {sorted(unknown)} are unknown; use fp32, bf16 "
+                             "or fp32-compiled")
         if config.stability not in ("full", "small", "off"):
             raise ValueError(f"{path}: stability must be full, small or off")
         return config
