@@ -122,7 +122,8 @@ def evaluate_rigid(sequences: list[TestSequence]) -> MethodResult:
 
 def _warm_up(estimator, graph, sequence: TestSequence, device: torch.device) -> None:
     """Streams a sequence's first frames once with ``compile=True``: compiled code
-    is cached by shape, so the timed stream of the same garment starts compiled."""
+    is cached (one compilation serves every garment size), so the timed stream
+    starts compiled."""
     stream = SwinGarStream(estimator, graph, sequence.body_shape.to(device), sequence.motion.fps,
                            compile=True)
     for t in range(min(3, len(sequence.truth))):

@@ -41,8 +41,9 @@ class SwinGarStream:
             stage of each step that yields a function taking the stage's output
             tensors (:class:`~swingar_pyg.inference.scene.StageTimer`).
         compile: run the per-frame garment work through :func:`torch.compile`
-            (shapes fixed by the garment). Compiling takes tens of seconds once,
-            then each frame costs about half; it pays on long or live streams.
+            with dynamic shapes, so one compilation (tens of seconds, once per
+            process) serves every garment size; each frame then costs about half.
+            It pays on long or live streams.
     """
 
     def __init__(self, estimator: SwinGarEstimator, garment, body_shape: Tensor, fps: float,
@@ -66,7 +67,7 @@ class SwinGarStream:
         self._input_terms: deque[Tensor] = deque(maxlen=TARGET_FRAMES)
         stages = (self._skin, self._detail_input_terms, self._refine)
         if compile:
-            stages = tuple(torch.compile(stage, dynamic=False) for stage in stages)
+            stages = tuple(torch.compile(stage, dynamic=True) for stage in stages)
         self._skin_stage, self._input_terms_stage, self._refine_stage = stages
 
     @torch.no_grad()
@@ -102,7 +103,8 @@ class SwinGarStream:
             self._input_terms.append(self._input_terms_stage(
                 skinned, joint_positions.to(features), frame_rotation, frame_origin))
             terms = list(self._input_terms)
-            terms = [terms[0]] * (TARGET_FRAMES - len(terms)) + terms
+            # distinct copies: compiled code would recompile for aliased inputs
+            terms = [terms[0].clone() for _ in range(TARGET_FRAMES - len(terms))] + terms
             refined = self._refine_stage(*terms, skinned, body_code, frame_rotation)
             record(refined)
         return refined
