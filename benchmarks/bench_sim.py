@@ -1,6 +1,6 @@
-"""The ground-truth simulator's own error against run time.
+"""The ground-truth simulator's own error against run time, per backend.
 
-    OMP_NUM_THREADS=1 python benchmarks/bench_sim.py            # ~18 minutes on one core
+    OMP_NUM_THREADS=1 python benchmarks/bench_sim.py            # ~25 minutes on one core
     OMP_NUM_THREADS=1 python benchmarks/bench_sim.py --quick    # one small skirt
 
 Scene: a procedural knee-length skirt on the default anny body doing ``--motion`` (walk by
@@ -13,6 +13,12 @@ error-controlled setting ``SxI:M`` included). Also recorded: the mean substeps a
 largest edge strain, the share of frames above the 6 % stretch bar and of vertices inside the
 body. This is the curve the estimator is later placed on (``swingar report`` draws the same
 curve on the test data).
+
+Every setting runs on each ``--backends`` (the torch path and the warp kernel, side by side
+in one run); the reference is always the torch path. Each run also records its throughput,
+simulated vertex-frames per second of one core, and the summary gives the warp kernel's
+speed-up over the torch path per garment and setting (the ratio of their times a frame)
+next to both errors.
 
 The reference itself is run a second time on the same scene with the rest garment moved by
 ``PERTURBATION`` (1 micrometre, random per vertex): how far that run drifts from the first is
@@ -59,6 +65,27 @@ PERTURBATION = 1e-6  # metres; float32 positions near 1 m resolve ~1e-7
 MOVED = f"{PERTURBATION * 1e6:g} µm"
 
 
+def speedups(rows: list[dict]) -> list[dict]:
+    """Per garment and setting run on both backends: the warp kernel's speed-up over the
+    torch path (their times a frame) and both errors against the reference."""
+    table = []
+    for row in rows:
+        runs = {(r["setting"], r["backend"]): r for r in row["runs"]
+                if not r["reference"] and not r["perturbed"]}
+        for (setting, backend), warp in runs.items():
+            if backend != "warp" or (setting, "torch") not in runs:
+                continue
+            torch_run = runs[(setting, "torch")]
+            table.append({"vertices": row["vertices"], "setting": setting,
+                          "speedup": torch_run["ms_per_frame"] / warp["ms_per_frame"],
+                          "torch_error_mm": torch_run["mean_error_mm"],
+                          "warp_error_mm": warp["mean_error_mm"],
+                          "warp_vertex_frames_per_second": warp["vertex_frames_per_second"],
+                          "torch_vertex_frames_per_second":
+                              torch_run["vertex_frames_per_second"]})
+    return table
+
+
 def plot(rows: list[dict], reference: str):
     import matplotlib
 
@@ -66,26 +93,43 @@ def plot(rows: list[dict], reference: str):
     import matplotlib.pyplot as plt
     from matplotlib.ticker import NullFormatter, ScalarFormatter
 
-    figure, (error_axis, strain_axis) = plt.subplots(1, 2, figsize=(11, 4))
+    figure, (error_axis, strain_axis, speed_axis) = plt.subplots(1, 3, figsize=(16, 4.5))
+    styles = {"torch": "o-", "warp": "s--"}
     for row in rows:
-        runs = sorted((r for r in row["runs"] if not r["reference"] and not r["perturbed"]),
-                      key=lambda r: r["ms_per_frame"])
-        times = [r["ms_per_frame"] for r in runs]
-        line, = error_axis.plot(times, [r["mean_error_mm"] for r in runs], "o-",
-                                label=f"{row['vertices']} vertices")
+        colour = None
+        for backend in sorted({r["backend"] for r in row["runs"]}):
+            runs = sorted((r for r in row["runs"] if r["backend"] == backend
+                           and not r["reference"] and not r["perturbed"]),
+                          key=lambda r: r["ms_per_frame"])
+            if not runs:
+                continue
+            times = [r["ms_per_frame"] for r in runs]
+            line, = error_axis.plot(times, [r["mean_error_mm"] for r in runs], styles[backend],
+                                    color=colour, label=f"{row['vertices']} vertices, {backend}")
+            colour = line.get_color()
+            for r, t in zip(runs, times):
+                error_axis.annotate(r["setting"], (t, r["mean_error_mm"]),
+                                    fontsize=6, xytext=(3, 3), textcoords="offset points")
+            strain_axis.plot(times, [100 * r["max_strain"] for r in runs], styles[backend],
+                             color=colour, label=f"{row['vertices']} vertices, {backend}")
         floor = next(r for r in row["runs"] if r["perturbed"])["mean_error_mm"]
-        error_axis.axhline(floor, color=line.get_color(), linestyle="--", linewidth=0.8,
+        error_axis.axhline(floor, color=colour, linestyle=":", linewidth=0.8,
                            label=f"{row['vertices']}: reference moved {MOVED}")
-        for r, t in zip(runs, times):
-            error_axis.annotate(r["setting"], (t, r["mean_error_mm"]),
-                                fontsize=6, xytext=(3, 3), textcoords="offset points")
-        strain_axis.plot(times, [100 * r["max_strain"] for r in runs], "o-",
-                         label=f"{row['vertices']} vertices")
+    table = speedups(rows)
+    settings = list(dict.fromkeys(r["setting"] for r in table))
+    for count in sorted({r["vertices"] for r in table}):
+        values = {r["setting"]: r["speedup"] for r in table if r["vertices"] == count}
+        speed_axis.plot(range(len(settings)), [values.get(s, float("nan")) for s in settings],
+                        "o-", label=f"{count} vertices")
+    speed_axis.set_xticks(range(len(settings)), settings, rotation=45, fontsize=7)
+    speed_axis.set(ylabel="warp speed-up over torch (x)", title="time a frame, torch / warp")
+    speed_axis.grid(alpha=0.3)
+    speed_axis.legend(fontsize=7)
     strain_axis.axhline(100 * STRETCH_BAR, color="grey", linestyle=":", linewidth=0.8,
                         label="stretch bar")
     error_axis.set(xscale="log", yscale="log", xlabel="ms per frame (one core)",
                    ylabel="mean vertex error vs reference (mm)",
-                   title=f"simulator error vs run time (reference {reference})")
+                   title=f"simulator error vs run time (reference {reference}, torch)")
     strain_axis.set(xscale="log", xlabel="ms per frame", ylabel="largest edge strain (%)",
                     title="largest edge strain")
     error_axis.yaxis.set_major_formatter(ScalarFormatter())
@@ -93,7 +137,7 @@ def plot(rows: list[dict], reference: str):
     for axis in (error_axis, strain_axis):
         axis.xaxis.set_minor_formatter(NullFormatter())
         axis.grid(alpha=0.3, which="both")
-        axis.legend(fontsize=7)
+        axis.legend(fontsize=6)
     figure.tight_layout()
     return figure
 
@@ -106,6 +150,8 @@ def main() -> None:
     parser.add_argument("--settings", nargs="+", metavar="SxI[:M[/R]]",
                         help="settings to place on the curve (default: " +
                         " ".join(setting_label(s) for s in SETTINGS) + ")")
+    parser.add_argument("--backends", nargs="+", choices=("torch", "warp"),
+                        default=["torch", "warp"], help="XPBD backends to run every setting on")
     parser.add_argument("--reference", metavar="SxI", default=setting_label(REFERENCE),
                         help="the fine setting errors are measured from (default: %(default)s)")
     parser.add_argument("--quick", action="store_true", help="300 vertices, 0.5 s")
@@ -136,22 +182,28 @@ def main() -> None:
         garment = fit_procedural_skirt(SkirtSpec(vertices=count), body, shape)
         moved = perturbed(garment, PERTURBATION)
         runs, reference_positions = [], None
-        schedule = ([(reference, garment), (reference, moved)]
-                    + [(setting, garment) for setting in settings])
-        for setting, scene in schedule:
+        schedule = ([(reference, garment, "torch"), (reference, moved, "torch")]
+                    + [(setting, garment, backend) for setting in settings
+                       for backend in args.backends])
+        for setting, scene, backend in schedule:
             substeps, iterations, max_substeps, stall_ratio = setting
             solver = XPBDSettings(fps=motion.fps, substeps=substeps, iterations=iterations,
-                                  max_substeps=max_substeps, stall_ratio=stall_ratio)
+                                  max_substeps=max_substeps, stall_ratio=stall_ratio,
+                                  backend=backend)
             result = simulate_sequence(body, shape, scene, motion, solver).result
             if reference_positions is None:
                 reference_positions = result.positions
             error = (result.positions - reference_positions).norm(dim=-1)
-            runs.append({"setting": setting_label(setting), "substeps": substeps,
+            ms_per_frame = 1e3 * float(np.mean(result.seconds_per_frame))
+            runs.append({"setting": setting_label(setting), "backend": backend,
+                         "substeps": substeps,
                          "iterations": iterations, "max_substeps": max_substeps,
                          "stall_ratio": stall_ratio,
                          "reference": scene is garment and setting == reference,
                          "perturbed": scene is moved,
-                         "ms_per_frame": 1e3 * float(np.mean(result.seconds_per_frame)),
+                         "ms_per_frame": ms_per_frame,
+                         "vertex_frames_per_second": 1e3 * garment.mesh.num_vertices
+                         / ms_per_frame,
                          "mean_substeps": float(np.mean(result.substeps_per_frame)),
                          "mean_error_mm": 1e3 * float(error.mean()),
                          "p95_error_mm": 1e3 * float(error.quantile(0.95)),
@@ -160,7 +212,7 @@ def main() -> None:
                          "mean_strain": float(result.mean_stretch.mean()),
                          "max_penetration": float(np.nanmax(result.penetration))})
             r = runs[-1]
-            print(f"N={garment.mesh.num_vertices:>5} {r['setting']:>9}"
+            print(f"N={garment.mesh.num_vertices:>5} {r['setting']:>9} {backend:>5}"
                   f"{f' moved {MOVED}' if scene is moved else ''}: "
                   f"{r['ms_per_frame']:7.1f} ms/frame ({r['mean_substeps']:.0f} substeps), "
                   f"error {r['mean_error_mm']:6.1f} mm (p95 {r['p95_error_mm']:6.1f}), "
@@ -171,7 +223,10 @@ def main() -> None:
     payload = {"machine": machine_info(), "simulator_revision": SIMULATOR_REVISION,
                "motion": motion.name, "seconds": args.seconds,
                "reference": setting_label(reference), "perturbation_m": PERTURBATION,
-               "rows": rows}
+               "rows": rows, "speedups": speedups(rows)}
+    for r in payload["speedups"]:
+        print(f"N={r['vertices']:>5} {r['setting']:>9}: warp {r['speedup']:.1f}x faster, "
+              f"error {r['warp_error_mm']:.1f} mm against torch's {r['torch_error_mm']:.1f}")
     name = "bench_sim" + ("_quick" if args.quick else "")
     path = write_results(name, payload, plot(rows, payload["reference"]))
     print(f"wrote {path} and its .png")

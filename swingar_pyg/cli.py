@@ -74,6 +74,8 @@ def _simulate(args: argparse.Namespace) -> int:
         if args.solver != "xpbd":
             raise ValueError("--max-substeps is XPBD's error control; VBD runs fixed substeps")
         steps["max_substeps"] = args.max_substeps
+    if args.solver == "xpbd":
+        steps["backend"] = args.backend
     if args.stall_ratio is not None:
         if not args.max_substeps:
             raise ValueError("--stall-ratio stops --max-substeps' doubling early; give both")
@@ -204,6 +206,9 @@ def build_parser() -> argparse.ArgumentParser:
                           help="XPBD bending model (default: dihedral, the datasets': hinge "
                                "angles at VBD's stiffness; distance: constraints between the "
                                "opposite corners of adjacent triangles)")
+    simulate.add_argument("--backend", choices=("warp", "torch"), default="warp",
+                          help="XPBD: warp (one compiled kernel a frame on the CPU, the "
+                               "default) or torch (tensor operations on any device)")
     simulate.add_argument("--substeps", type=int, default=None,
                           help="per frame (default: the solver's, XPBD 50, VBD 10; the "
                                "quickstart data use XPBD 100 x 1, up to 400 on frames above "

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import torch
 
-from swingar_pyg.geometry import as_mesh, sheet
+from swingar_pyg.geometry import as_mesh, sheet, weld_mesh
 from swingar_pyg.sim import XPBDCloth, XPBDSettings
 from swingar_pyg.sim.constraints import dihedral_angles, dihedral_constraints, hinges
 
@@ -79,13 +79,18 @@ def test_a_hinge_holds_a_wing_where_its_torque_balances_gravity(stiffness):
     assert result.max_stretch.max() < 0.01
 
 
-def test_stiff_and_degenerate_dihedral_cloth_stays_finite():
+def test_degenerate_cloth_is_refused_and_stiff_welded_cloth_stays_finite():
     flat = sheet(6, 6, width=0.2, height=0.2, jitter=0.3)
     vertices = flat.vertices.copy()
     vertices[7] = vertices[8]  # a collapsed edge: two zero-area triangles
     mesh = as_mesh(vertices, flat.faces)
     top = np.flatnonzero(np.isclose(vertices[:, 1], vertices[:, 1].max()))
-    initial = torch.from_numpy(vertices).float()
+    with pytest.raises(ValueError, match='2 coincident vertices, 1 zero-length edges'):
+        XPBDCloth(mesh, top, XPBDSettings(bending="dihedral"))
+    mesh, report = weld_mesh(mesh)
+    assert report.merged_vertices == 1 and report.dropped_faces == 2
+    top = report.new_index[top]
+    initial = torch.from_numpy(mesh.vertices).float()
     for stiffness in (0.0, 1e-3, 1e6):
         settings = XPBDSettings(substeps=5, iterations=2, bending="dihedral",
                                 bend_stiffness=stiffness, settle_frames=0)

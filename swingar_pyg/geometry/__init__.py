@@ -28,6 +28,13 @@ from swingar_pyg.geometry.spectral import (
     gaussian_affinity,
     spectral_descriptor,
 )
+from swingar_pyg.geometry.weld import (
+    WELD_TOLERANCE,
+    WeldReport,
+    degeneracies,
+    refuse_degenerate,
+    weld_mesh,
+)
 
 __all__ = [
     "BodySurface",
@@ -52,4 +59,9 @@ __all__ = [
     "spectral_descriptor",
     "DESCRIPTOR_SIGMA",
     "vertex_normals",
+    "WELD_TOLERANCE",
+    "WeldReport",
+    "degeneracies",
+    "refuse_degenerate",
+    "weld_mesh",
 ]

@@ -30,6 +30,7 @@ import torch
 from torch import Tensor
 
 from swingar_pyg.geometry.mesh import Mesh
+from swingar_pyg.geometry.weld import refuse_degenerate
 from swingar_pyg.sim.collider import BodyCollider
 from swingar_pyg.sim.constraints import distance_constraints, stretch_pairs
 from swingar_pyg.sim.recording import FrameRecorder, SimulationResult, check_inputs
@@ -113,6 +114,7 @@ class VBDCloth:
 
     def __init__(self, mesh: Mesh, pinned: np.ndarray, settings: VBDSettings,
                  device: torch.device | str = "cpu"):
+        refuse_degenerate(mesh)
         self.mesh, self.settings = mesh, settings
         self.device = torch.device(device)
         pinned = np.asarray(pinned, dtype=np.int64)

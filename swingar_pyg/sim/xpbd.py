@@ -51,6 +51,7 @@ import torch
 from torch import Tensor
 
 from swingar_pyg.geometry.mesh import Mesh
+from swingar_pyg.geometry.weld import refuse_degenerate
 from swingar_pyg.sim.collider import BodyCollider, ContactTrack
 from swingar_pyg.sim.constraints import (
     DistanceConstraints,
@@ -114,6 +115,9 @@ class XPBDSettings:
             :math:`r`, and the frame keeps whichever of its runs ended least stretched
             (an over-constrained frame then costs ``3 * substeps`` substeps, where
             doubling to a cap of ``4 * substeps`` costs ``7 * substeps``).
+        backend: ``"torch"`` (tensor operations on any device, the reference) or
+            ``"warp"`` (the substep loop as one compiled NVIDIA Warp kernel on the CPU,
+            float32; the same steps, several times faster: ``benchmarks/bench_sim.py``).
     """
 
     fps: float = 30.0
@@ -135,6 +139,7 @@ class XPBDSettings:
     max_substeps: int | None = None
     target_stretch: float = STRETCH_BAR
     stall_ratio: float | None = None
+    backend: str = "torch"
 
     def __post_init__(self):
         if (self.fps <= 0 or self.substeps < 1 or self.iterations < 1
@@ -142,6 +147,8 @@ class XPBDSettings:
             raise ValueError(f"fps, substeps, iterations and contacts_per_frame must be "
                              f"positive, got {self.fps}, {self.substeps}, {self.iterations}, "
                              f"{self.contacts_per_frame}")
+        if self.backend not in ("torch", "warp"):
+            raise ValueError(f"backend must be 'torch' or 'warp', got {self.backend!r}")
         if self.bending not in ("distance", "dihedral"):
             raise ValueError(f"bending must be 'distance' or 'dihedral', got {self.bending!r}")
         for name in ("stretch_compliance", "bend_compliance", "bend_stiffness", "tether_slack",
@@ -208,10 +215,17 @@ class XPBDCloth:
         pinned: indices of vertices that follow ``pin_targets`` instead of physics.
         settings: solver settings.
         device, dtype: where and in what precision to run.
+
+    Raises:
+        ValueError: for pins out of range, and for a mesh with coincident vertices,
+            zero-length edges or zero-area faces (weld it first:
+            :func:`~swingar_pyg.geometry.weld.weld_mesh`, which
+            :func:`~swingar_pyg.world.garment.garment_on_body` applies).
     """
 
     def __init__(self, mesh: Mesh, pinned: np.ndarray, settings: XPBDSettings,
                  device: torch.device | str = "cpu", dtype: torch.dtype = torch.float32):
+        refuse_degenerate(mesh)
         self.mesh, self.settings = mesh, settings
         self.device, self.dtype = torch.device(device), dtype
         pinned = np.asarray(pinned, dtype=np.int64)
@@ -240,6 +254,29 @@ class XPBDCloth:
             self.hinge_shares = self.hinge_weights * self.bend.share[self.hinge_corners, 0]
         self._substeps: dict[int, _Substep] = {}
         self.gravity = torch.tensor(settings.gravity, device=self.device, dtype=dtype)
+        self._warp = self._warp_substeps() if settings.backend == "warp" else None
+
+    def _warp_substeps(self):
+        """The warp kernel's arrays for this cloth (:mod:`swingar_pyg.sim.warp_xpbd`)."""
+        # Warp is optional (it comes with the sim extra's body model): imported on use
+        from swingar_pyg.sim.warp_xpbd import WarpSubsteps
+
+        no_pairs, none = torch.zeros(0, 2, dtype=torch.long), torch.zeros(0)
+        distance_bending = self.settings.bending == "distance"
+        hinged = not distance_bending and self.settings.bend_stiffness > 0
+        tethers = self.tethers
+        return WarpSubsteps(
+            self.inverse_mass, self.pinned, self.stretch.pairs, self.stretch.rest_lengths,
+            self.bend.pairs if distance_bending else no_pairs,
+            self.bend.rest_lengths if distance_bending else none,
+            self.bend.hinges if hinged else torch.zeros(0, 4, dtype=torch.long),
+            self.hinge_weights.T if hinged else torch.zeros(0, 4),
+            self.hinge_shares.T if hinged else torch.zeros(0, 4),
+            self.bend.rest_angles if hinged else none,
+            tethers.vertices if tethers is not None else none.long(),
+            tethers.anchors if tethers is not None else none.long(),
+            (1.0 + self.settings.tether_slack) * tethers.rest_lengths
+            if tethers is not None else none)
 
     def _substep(self, substeps: int) -> _Substep:
         """The terms of ``substeps`` steps a frame, made once per cloth."""
@@ -346,21 +383,36 @@ class XPBDCloth:
                step: _Substep) -> tuple[Tensor, Tensor]:
         """One output frame of ``step.substeps`` substeps from positions ``x`` and
         velocities ``v`` (left unchanged), the pins moving from ``previous_target`` to
-        ``target``; returns the frame's end positions and velocities."""
-        s, dt = self.settings, step.dt
-        decay = float(np.exp(-s.damping * dt))
-        stretch_lagrange = torch.zeros_like(self.stretch.rest_lengths)
-        bend_lagrange = torch.zeros_like(self.bend.rest_lengths)
-        contact_interval = max(1, step.substeps // s.contacts_per_frame)
-        track = body_step = None
-        for sub in range(step.substeps):
-            fraction = (sub + 1) / step.substeps
-            if collider is not None and sub % contact_interval == 0:
-                at = 1.0 if settling else sub / step.substeps
+        ``target``; returns the frame's end positions and velocities. The contacts are
+        found again every ``substeps / contacts_per_frame`` substeps."""
+        s = self.settings
+        interval = (max(1, step.substeps // s.contacts_per_frame) if collider is not None
+                    else step.substeps)
+        for first in range(0, step.substeps, interval):
+            count = min(interval, step.substeps - first)
+            track = body_step = None
+            if collider is not None:
+                at = 1.0 if settling else first / step.substeps
                 track = collider.track(frame, collider.nearest(frame, x, at))
                 body_step = track.motion.to(self.device, self.dtype) / step.substeps
                 if settling:
                     body_step = torch.zeros_like(body_step)
+            run = self._warp_substeps_run if self._warp is not None else self._substeps_run
+            x, v = run(x, v, first, count, previous_target, target, track, body_step,
+                       collider.thickness if collider is not None else 0.0, settling, step)
+        return x, v
+
+    def _substeps_run(self, x: Tensor, v: Tensor, first: int, count: int,
+                      previous_target: Tensor, target: Tensor, track: ContactTrack | None,
+                      body_step: Tensor | None, thickness: float, settling: bool,
+                      step: _Substep) -> tuple[Tensor, Tensor]:
+        """Substeps ``first .. first + count`` with tensor operations (the reference)."""
+        s, dt = self.settings, step.dt
+        decay = float(np.exp(-s.damping * dt))
+        stretch_lagrange = torch.zeros_like(self.stretch.rest_lengths)
+        bend_lagrange = torch.zeros_like(self.bend.rest_lengths)
+        for sub in range(first, first + count):
+            fraction = (sub + 1) / step.substeps
             v = (v + dt * self.gravity) * decay
             p = x + dt * v
             p[self.pinned] = torch.lerp(previous_target, target, fraction)
@@ -376,13 +428,36 @@ class XPBDCloth:
                     self._solve_hinges(p, step.hinge_compliance, bend_lagrange)
                 if self.tethers is not None:
                     self._tether(p, self.tethers)
-                if collider is not None:
+                if track is not None:
                     body_fraction = 1.0 if settling else fraction
-                    self._collide(p, x, track, body_fraction, body_step, collider.thickness)
+                    self._collide(p, x, track, body_fraction, body_step, thickness)
                 self._solve(p, *step.stretch_colours, stretch_lagrange)
             v = (p - x) / dt
             x = p
         return x, v
+
+    def _warp_substeps_run(self, x: Tensor, v: Tensor, first: int, count: int,
+                           previous_target: Tensor, target: Tensor,
+                           track: ContactTrack | None, body_step: Tensor | None,
+                           thickness: float, settling: bool,
+                           step: _Substep) -> tuple[Tensor, Tensor]:
+        """The same substeps as :meth:`_substeps_run`, in one warp kernel launch."""
+        s = self.settings
+        stretch_alpha, stretch_colours = step.stretch_colours
+        bend_alpha, bend_colours = step.bend_colours or (0.0, ())
+        compliance = self._warp.compliance(
+            step.substeps, torch.cat([c.inverse_denominator for c in stretch_colours]),
+            torch.cat([c.inverse_denominator for c in bend_colours]) if bend_colours
+            else torch.zeros(0),
+            step.hinge_compliance if step.hinge_compliance is not None
+            and s.bend_stiffness > 0 else torch.zeros(0))
+        contacts = None
+        if track is not None:
+            contacts = (track.start, track.end, track.start_normal, track.end_normal, body_step)
+        return self._warp.run(x, v, first, count, step.substeps, s.iterations, step.dt,
+                              float(np.exp(-s.damping * step.dt)), self.gravity,
+                              previous_target, target, compliance, stretch_alpha, bend_alpha,
+                              contacts, 1.0 if settling else -1.0, thickness, s.friction)
 
     def _controlled_frame(self, x: Tensor, v: Tensor, frame: int, previous_target: Tensor,
                           target: Tensor, collider: BodyCollider | None,

@@ -8,6 +8,7 @@ garment entries: :mod:`~swingar_pyg.world.catalogue`.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -17,6 +18,7 @@ from scipy.spatial import cKDTree
 
 from swingar_pyg.geometry.mesh import Mesh, as_mesh, boundary_edges, mesh_edges
 from swingar_pyg.geometry.signed_distance import closest_face_signed_distance
+from swingar_pyg.geometry.weld import weld_mesh
 from swingar_pyg.world.body import BodyModel
 
 # Bones whose vertices do not bound a skirt: in the rest A-pose the hands hang beside
@@ -141,8 +143,17 @@ def garment_on_body(name: str, mesh: Mesh, body: BodyModel, shape,
     (metres, +Z up), made ready to animate: pinned at ``pinned`` or else at its
     highest boundary loops (:func:`top_boundary_loops`: waistband, neckline,
     straps; skinned to the torso), skinning transferred from the body, and the
-    fit attribute measured on that body."""
-    mesh = as_mesh(mesh.vertices, mesh.faces)
+    fit attribute measured on that body.
+
+    Coincident vertices and zero-area faces are welded away first
+    (:func:`~swingar_pyg.geometry.weld.weld_mesh`, with a warning saying what
+    changed; ``pinned`` is carried over to the welded indices)."""
+    mesh, welded = weld_mesh(as_mesh(mesh.vertices, mesh.faces))
+    if welded:
+        warnings.warn(f"garment {name!r}: {welded}", stacklevel=2)
+        if pinned is not None:
+            pinned = np.unique(welded.new_index[np.asarray(pinned, np.int64)])
+            pinned = pinned[pinned >= 0]
     rest = body.rest_vertices(shape).numpy().astype(np.float64)
     faces = body.faces.numpy()
     pinned = top_boundary_loops(mesh) if pinned is None else np.asarray(pinned, np.int64)

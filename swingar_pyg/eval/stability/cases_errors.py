@@ -10,7 +10,7 @@ from swingar_pyg.collision import resolve_collisions
 from swingar_pyg.eval.stability.records import Case
 from swingar_pyg.geometry import as_mesh, sheet, spectral_descriptor
 from swingar_pyg.models import BodySDF, GarmentWindow
-from swingar_pyg.sim import VBDSettings, XPBDSettings
+from swingar_pyg.sim import VBDSettings, XPBDCloth, XPBDSettings
 
 
 def _raise_mesh_nan(context):
@@ -19,6 +19,13 @@ def _raise_mesh_nan(context):
 
 def _raise_simulator_settings(context):
     XPBDSettings(stretch_compliance=-1.0)
+
+
+def _raise_simulator_coincident_vertices(context):
+    flat = sheet(4, 4)
+    vertices = flat.vertices.copy()
+    vertices[5] = vertices[6]
+    XPBDCloth(as_mesh(vertices, flat.faces), [0], XPBDSettings())
 
 
 def _raise_vbd_settings(context):
@@ -55,6 +62,8 @@ ERROR_CASES: tuple[Case, ...] = (
     Case("mesh", "NaN vertex", "", _raise_mesh_nan, raises="not finite"),
     Case("simulator", "negative compliance", "", _raise_simulator_settings,
          raises="must be finite and >= 0"),
+    Case("simulator", "coincident vertices, zero-area faces", "",
+         _raise_simulator_coincident_vertices, raises="weld it first"),
     Case("VBD simulator", "negative bending stiffness", "", _raise_vbd_settings,
          raises="must be finite and >= 0", needs="newton"),
     Case("body", "shape outside [0, 1]", "", _raise_body_shape, raises="must lie in [0, 1]"),
