@@ -57,7 +57,10 @@ def simulate(settings, dtype, scene):
     {'tethers': False, 'friction': 0.0},
     {'contacts_per_frame': 3, 'iterations': 2},
     {'substeps': 5, 'max_substeps': 40},
-], ids=['dihedral', 'distance-bending', 'no-tethers-no-friction', 'contacts-thrice', 'rerun'])
+    {'bend_every': 3, 'contacts_per_frame': 2},
+    {'bend_every': 2, 'bending': 'distance'},
+], ids=['dihedral', 'distance-bending', 'no-tethers-no-friction', 'contacts-thrice', 'rerun',
+        'bend-every-3', 'distance-bend-every-2'])
 def test_the_warp_kernel_is_as_close_to_float64_as_the_torch_path(changes):
     scene = swinging_scene()
     settings = dataclasses.replace(XPBDSettings(substeps=10, settle_frames=1), **changes)

@@ -105,7 +105,7 @@ def xpbd_substeps(
         x: wp.array(dtype=wp.vec3), v: wp.array(dtype=wp.vec3), p: wp.array(dtype=wp.vec3),
         correction: wp.array(dtype=wp.vec3), inverse_mass: wp.array(dtype=float),
         gravity: wp.vec3, dt: float, decay: float,
-        first: int, count: int, substeps: int, iterations: int,
+        first: int, count: int, substeps: int, iterations: int, bend_every: int,
         # pins move linearly from pin_start to pin_end over the frame
         pinned: wp.array(dtype=int), pin_start: wp.array(dtype=wp.vec3),
         pin_end: wp.array(dtype=wp.vec3),
@@ -148,11 +148,13 @@ def xpbd_substeps(
         plane_fraction = body_fraction
         if plane_fraction < 0.0:
             plane_fraction = fraction
+        bend = sub % bend_every == 0
         for iteration in range(iterations):
             # the torch path's order: bending, tethers, contacts, stretch last
-            _solve_distance(p, inverse_mass, bend_i, bend_j, bend_rest, bend_inverse,
-                            bend_alpha, bend_lagrange)
-            if hinges.shape[0] > 0:
+            if bend:
+                _solve_distance(p, inverse_mass, bend_i, bend_j, bend_rest, bend_inverse,
+                                bend_alpha, bend_lagrange)
+            if bend and hinges.shape[0] > 0:
                 for h in range(hinges.shape[0]):
                     _hinge_step(p, h, hinges, hinge_weights, hinge_shares, hinge_rest,
                                 hinge_compliance, hinge_lagrange, correction)
@@ -257,9 +259,9 @@ class WarpSubsteps:
         return self._per_substeps[substeps]
 
     def run(self, x: Tensor, v: Tensor, first: int, count: int, substeps: int,
-            iterations: int, dt: float, decay: float, gravity: Tensor, pin_start: Tensor,
-            pin_end: Tensor, compliance: tuple, stretch_alpha: float, bend_alpha: float,
-            contacts: tuple[Tensor, Tensor, Tensor, Tensor, Tensor] | None,
+            iterations: int, bend_every: int, dt: float, decay: float, gravity: Tensor,
+            pin_start: Tensor, pin_end: Tensor, compliance: tuple, stretch_alpha: float,
+            bend_alpha: float, contacts: tuple[Tensor, Tensor, Tensor, Tensor, Tensor] | None,
             body_fraction: float, thickness: float, friction: float) -> tuple[Tensor, Tensor]:
         """Substeps ``first .. first + count`` of a frame of ``substeps`` from ``x``,
         ``v`` (left unchanged); returns the new positions and velocities.
@@ -278,6 +280,7 @@ class WarpSubsteps:
         wp.launch(xpbd_substeps, dim=1, device="cpu", inputs=[
             self.x, self.v, self.p, self.correction, self.inverse_mass,
             wp.vec3(*gravity.tolist()), dt, decay, first, count, substeps, iterations,
+            bend_every,
             self.pinned, *(wp.from_torch(t, dtype=wp.vec3) for t in targets),
             *self.stretch, stretch_inverse, stretch_alpha, self.stretch_lagrange,
             *self.bend, bend_inverse, bend_alpha, self.bend_lagrange,

@@ -91,6 +91,13 @@ class XPBDSettings:
         bend_compliance: m/N, distance bending; larger bends more easily.
         bend_stiffness: N m per radian² per metre of edge, dihedral bending (newton's
             VBD ``edge_ke``).
+        bend_every: solve bending on one substep in this many, with its compliance
+            divided by it, so that the bending impulse over those substeps stays the same
+            (multirate stepping: the stretch that needs short steps is solved on every
+            one). Bending at the default stiffness is soft, with its natural period far
+            above a frame, and the XPBD projection cannot overshoot at any stiffness; the
+            hinges are most of a substep's cost (``benchmarks/bench_sim.py`` measures the
+            error this adds against the reference).
         tethers: keep each free vertex within its rest geodesic distance of its
             nearest pin (long-range attachments).
         tether_slack: how much farther than that it may go, as a fraction.
@@ -127,6 +134,7 @@ class XPBDSettings:
     bending: str = "dihedral"
     bend_compliance: float = 1e-4
     bend_stiffness: float = 1e-3
+    bend_every: int = 1
     tethers: bool = True
     tether_slack: float = 0.02
     density: float = 0.15
@@ -143,10 +151,10 @@ class XPBDSettings:
 
     def __post_init__(self):
         if (self.fps <= 0 or self.substeps < 1 or self.iterations < 1
-                or self.contacts_per_frame < 1):
-            raise ValueError(f"fps, substeps, iterations and contacts_per_frame must be "
-                             f"positive, got {self.fps}, {self.substeps}, {self.iterations}, "
-                             f"{self.contacts_per_frame}")
+                or self.contacts_per_frame < 1 or self.bend_every < 1):
+            raise ValueError(f"fps, substeps, iterations, contacts_per_frame and bend_every "
+                             f"must be positive, got {self.fps}, {self.substeps}, "
+                             f"{self.iterations}, {self.contacts_per_frame}, {self.bend_every}")
         if self.backend not in ("torch", "warp"):
             raise ValueError(f"backend must be 'torch' or 'warp', got {self.backend!r}")
         if self.bending not in ("distance", "dihedral"):
@@ -191,7 +199,7 @@ class _Substep:
     dt: float
     stretch_colours: tuple[float, tuple[_Colour, ...]]
     bend_colours: tuple[float, tuple[_Colour, ...]] | None  # distance bending
-    hinge_compliance: Tensor | None  # dihedral bending: 1 / (k |e0| dt^2) per hinge
+    hinge_compliance: Tensor | None  # dihedral: 1 / (k |e0| dt^2 bend_every) per hinge
 
 
 def vertex_masses(mesh: Mesh, density: float) -> Tensor:
@@ -285,9 +293,10 @@ class XPBDCloth:
             dt = 1.0 / (s.fps * substeps)
             bend_colours = hinge_compliance = None
             if s.bending == "distance":
-                bend_colours = self._colours(self.bend, s.bend_compliance, dt)
+                bend_colours = self._colours(self.bend, s.bend_compliance / s.bend_every, dt)
             else:
-                stiffness_dt2 = s.bend_stiffness * self.bend.rest_lengths * dt * dt
+                stiffness_dt2 = (s.bend_stiffness * self.bend.rest_lengths * dt * dt
+                                 * s.bend_every)
                 hinge_compliance = 1.0 / stiffness_dt2.clamp_min(torch.finfo(self.dtype).tiny)
             self._substeps[substeps] = _Substep(
                 substeps, dt, self._colours(self.stretch, s.stretch_compliance, dt),
@@ -418,13 +427,14 @@ class XPBDCloth:
             p[self.pinned] = torch.lerp(previous_target, target, fraction)
             stretch_lagrange.zero_()
             bend_lagrange.zero_()
+            bend = sub % s.bend_every == 0
             for _ in range(s.iterations):
                 # Stretch last: bending, tethers and contacts move vertices without
                 # regard to their edges; solved after them, the edges end each sweep
                 # nearest their rest lengths (see SIMULATOR_REVISION).
-                if s.bending == "distance":
+                if bend and s.bending == "distance":
                     self._solve(p, *step.bend_colours, bend_lagrange)
-                else:
+                elif bend:
                     self._solve_hinges(p, step.hinge_compliance, bend_lagrange)
                 if self.tethers is not None:
                     self._tether(p, self.tethers)
@@ -454,7 +464,8 @@ class XPBDCloth:
         contacts = None
         if track is not None:
             contacts = (track.start, track.end, track.start_normal, track.end_normal, body_step)
-        return self._warp.run(x, v, first, count, step.substeps, s.iterations, step.dt,
+        return self._warp.run(x, v, first, count, step.substeps, s.iterations, s.bend_every,
+                              step.dt,
                               float(np.exp(-s.damping * step.dt)), self.gravity,
                               previous_target, target, compliance, stretch_alpha, bend_alpha,
                               contacts, 1.0 if settling else -1.0, thickness, s.friction)
