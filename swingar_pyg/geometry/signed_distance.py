@@ -15,6 +15,8 @@ from importlib.util import find_spec
 
 import numpy as np
 
+from swingar_pyg.geometry.mesh import Mesh, as_mesh
+
 
 class BodySurface:
     """A closed, outward-facing triangle mesh prepared once for exact signed
@@ -123,3 +125,19 @@ def body_signed_distance(points: np.ndarray, vertices: np.ndarray,
     ``vertices`` ``(V, 3)``, ``faces`` ``(F, 3)``: ``s`` ``(M,)`` (positive
     inside) and the outward normal ``(M, 3)``."""
     return BodySurface(vertices, faces).signed_distance(points)
+
+
+def push_out(mesh: Mesh, body_vertices: np.ndarray, body_faces: np.ndarray,
+             clearance: float, passes: int = 4) -> Mesh:
+    """``mesh`` with every vertex nearer the body than ``clearance`` (or inside it)
+    moved out along the body's outward normal to ``clearance``; again, up to
+    ``passes`` times, where a move brought a vertex near another part (a crease)."""
+    surface = BodySurface(body_vertices, body_faces)
+    vertices = mesh.vertices.copy()
+    for _ in range(passes):
+        depth, normal = surface.signed_distance(vertices)  # positive inside
+        move = np.maximum(depth + clearance, 0.0)
+        if not move.any():
+            break
+        vertices += (move + 1e-3 * clearance * (move > 0))[:, None] * normal
+    return as_mesh(vertices, mesh.faces)

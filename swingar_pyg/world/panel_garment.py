@@ -35,7 +35,7 @@ from scipy.ndimage import gaussian_filter, maximum_filter, minimum_filter
 from scipy.spatial import Delaunay, cKDTree
 
 from swingar_pyg.geometry.mesh import Mesh, as_mesh
-from swingar_pyg.geometry.signed_distance import BodySurface
+from swingar_pyg.geometry.signed_distance import push_out
 from swingar_pyg.world.body import BodyModel, rest_pose
 from swingar_pyg.world.garment import (
     ARM_BONE_WORDS,
@@ -396,22 +396,6 @@ def lift_panels(points: np.ndarray, front_index: np.ndarray, back_index: np.ndar
         lifted = np.stack([points[:, 0], middle + (depth - middle) * taper, points[:, 1]], 1)
         vertices[index[used]] = lifted[used]
     return as_mesh(vertices, faces)
-
-
-def push_out(mesh: Mesh, body_vertices: np.ndarray, body_faces: np.ndarray,
-             clearance: float, passes: int = 4) -> Mesh:
-    """``mesh`` with every vertex nearer the body than ``clearance`` (or inside it)
-    moved out along the body's outward normal to ``clearance``; again, up to
-    ``passes`` times, where a move brought a vertex near another part (a crease)."""
-    surface = BodySurface(body_vertices, body_faces)
-    vertices = mesh.vertices.copy()
-    for _ in range(passes):
-        depth, normal = surface.signed_distance(vertices)  # positive inside
-        move = np.maximum(depth + clearance, 0.0)
-        if not move.any():
-            break
-        vertices += (move + 1e-3 * clearance * (move > 0))[:, None] * normal
-    return as_mesh(vertices, mesh.faces)
 
 
 # ------------------------------------------------------------------ fitting
