@@ -120,8 +120,9 @@ def plot(rows: list[dict], reference: str):
     figure, (error_axis, strain_axis, speed_axis) = plt.subplots(1, 3, figsize=(16, 4.5))
     styles = ["o-", "s--", "^:", "v-."]
     solvers = list(dict.fromkeys(r["solver"] for row in rows for r in row["runs"]))
+    colours = {row["vertices"]: f"C{k}" for k, row in enumerate(rows)}
     for row in rows:
-        colour = None
+        colour = colours[row["vertices"]]
         for solver, style in zip(solvers, styles):
             runs = sorted((r for r in row["runs"] if r["solver"] == solver
                            and not r["reference"] and not r["perturbed"]),
@@ -129,9 +130,8 @@ def plot(rows: list[dict], reference: str):
             if not runs:
                 continue
             times = [r["ms_per_frame"] for r in runs]
-            line, = error_axis.plot(times, [r["mean_error_mm"] for r in runs], style,
-                                    color=colour, label=f"{row['vertices']} vertices, {solver}")
-            colour = line.get_color()
+            error_axis.plot(times, [r["mean_error_mm"] for r in runs], style, color=colour,
+                            label=f"{row['vertices']} vertices, {solver}")
             for r, t in zip(runs, times):
                 error_axis.annotate(r["setting"], (t, r["mean_error_mm"]),
                                     fontsize=6, xytext=(3, 3), textcoords="offset points")
@@ -147,7 +147,8 @@ def plot(rows: list[dict], reference: str):
                             if r["vertices"] == count and r["solver"] == solver
                             and r["speedup_equal_error"])
             if points:
-                speed_axis.plot(*zip(*points), style, label=f"{count} vertices, {solver}")
+                speed_axis.plot(*zip(*points), style, color=colours[count],
+                                label=f"{count} vertices, {solver}")
     speed_axis.set(xscale="log", xlabel="mean vertex error vs reference (mm)",
                    ylabel="speed-up over the torch path (x)",
                    title="speed-up at equal error")
