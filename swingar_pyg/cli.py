@@ -127,6 +127,12 @@ def _make_dataset(args: argparse.Namespace) -> int:
         if places:
             print("  where those above it stretch most: " + ", ".join(
                 f"{place.replace('_', ' ')} {count}" for place, count in places.items()))
+        for key, title in (("by_garment_family", "garment family"), ("by_motion", "motion")):
+            print(f"  by {title}: " + "; ".join(
+                f"{name} {100 * row['share_over_stretch_bar']:.0f} % of {row['sequences']} "
+                f"above the bar (median largest {100 * row['max_stretch_median_sequence']:.1f} "
+                f"%, inside {100 * row['max_penetration_exact']:.2f} %)"
+                for name, row in sim[key].items()))
     return 0
 
 

@@ -36,7 +36,7 @@ def tiny_config(tmp_path: Path, text: str = TINY) -> DatasetConfig:
 
 def test_shipped_configs_plan_disjoint_splits():
     root = Path(__file__).resolve().parents[1] / 'configs' / 'data'
-    for name in ('quickstart', 'full'):
+    for name in ('quickstart', 'full', 'base'):
         config = DatasetConfig.from_yaml(root / f'{name}.yaml')
         jobs = plan_jobs(config)
         kinds = {split: {job.motion.kind for job in jobs if job.split == split}
@@ -90,6 +90,11 @@ def test_generation_resumes_and_merges(tmp_path):
     places = first['simulation']['over_stretch_bar_by_place']
     assert set(places) <= {'near_pins', 'touching', 'free'}
     assert sum(places.values()) == np.sum(np.array(largest) > STRETCH_BAR)
+    families = first['simulation']['by_garment_family']
+    assert list(families) == ['skirt'] and families['skirt']['sequences'] == 3
+    motions = first['simulation']['by_motion']
+    assert {name: row['sequences'] for name, row in motions.items()} == {'sway': 2, 'twist': 1}
+    assert np.isclose(motions['twist']['max_stretch'], largest[-1])  # the test split's one
     # A killed run leaves some parts; only the missing ones are simulated again.
     (output / 'parts' / 'train' / 'train-00001.h5').unlink()
     (output / 'train.h5').unlink()

@@ -33,7 +33,7 @@ from swingar_pyg.atomic import atomic_path
 from swingar_pyg.sim.recording import STRETCH_BAR, sequence_stretch_by_place
 from swingar_pyg.sim.xpbd import SIMULATOR_REVISION, XPBDSettings
 from swingar_pyg.world.body import AnnyBody
-from swingar_pyg.world.catalogue import fit_garment, garment_spec
+from swingar_pyg.world.catalogue import ShippedGarmentSpec, fit_garment, garment_spec
 from swingar_pyg.world.motion_library import make_motion
 from swingar_pyg.world.sequence import simulate_sequence
 from swingar_pyg.world.sequence_file import merge_sequence_files, write_sequences
@@ -187,6 +187,35 @@ def _run_job(job: Job, fps: float, seconds: float, solver: XPBDSettings, part: s
             "max_penetration_exact": float(sequence.penetration_exact.max())}
 
 
+def garment_family(spec) -> str:
+    """A garment spec's family: ``skirt``, ``dress``, ``tshirt``, ``jumpsuit`` or the
+    shipped piece's name."""
+    if isinstance(spec, ShippedGarmentSpec):
+        return spec.name
+    return type(spec).__name__.removesuffix("Spec").lower()
+
+
+def _simulation_figures(reports: list[dict]) -> dict:
+    """The simulator's figures over the sequences of ``reports`` (``_run_job``'s)."""
+    largest = np.array([r["max_stretch"] for r in reports])
+    return {
+        "sequences": len(reports),
+        "ms_per_frame_median": float(np.median([r["ms_per_frame"] for r in reports])),
+        # above the solver's substeps where it re-ran frames over the bar (max_substeps)
+        "substeps_mean": float(np.mean([r["mean_substeps"] for r in reports])),
+        "max_stretch": float(largest.max()),
+        # One sequence's largest strain is chaotic (benchmarks/bench_strain.py): how the
+        # sequences spread says more than the worst of them.
+        "max_stretch_median_sequence": float(np.median(largest)),
+        "share_over_stretch_bar": float((largest > STRETCH_BAR).mean()),
+        # where the sequences over the bar have their largest stretch (stretch_by_place)
+        "over_stretch_bar_by_place": dict(Counter(
+            max(r["max_stretch_by_place"], key=r["max_stretch_by_place"].get)
+            for r in reports if r["max_stretch"] > STRETCH_BAR)),
+        "max_penetration": float(max(r["max_penetration"] for r in reports)),
+        "max_penetration_exact": float(max(r["max_penetration_exact"] for r in reports))}
+
+
 def make_dataset(config: DatasetConfig, output: str | Path | None = None,
                  shard: tuple[int, int] = (0, 1), workers: int = 1,
                  progress: bool = True) -> dict:
@@ -254,22 +283,15 @@ def make_dataset(config: DatasetConfig, output: str | Path | None = None,
                                     "garments": len(config.garments.get(split, ())),
                                     "motions": [m.kind for m in config.motions.get(split, ())]}
     if reports:
-        largest = np.array([r["max_stretch"] for r in reports])
-        summary["simulation"] = {
-            "ms_per_frame_median": float(np.median([r["ms_per_frame"] for r in reports])),
-            # above the solver's substeps where it re-ran frames over the bar (max_substeps)
-            "substeps_mean": float(np.mean([r["mean_substeps"] for r in reports])),
-            "max_stretch": float(largest.max()),
-            # One sequence's largest strain is chaotic (benchmarks/bench_strain.py): how the
-            # sequences spread says more than the worst of them.
-            "max_stretch_median_sequence": float(np.median(largest)),
-            "share_over_stretch_bar": float((largest > STRETCH_BAR).mean()),
-            # where the sequences over the bar have their largest stretch (stretch_by_place)
-            "over_stretch_bar_by_place": dict(Counter(
-                max(r["max_stretch_by_place"], key=r["max_stretch_by_place"].get)
-                for r in reports if r["max_stretch"] > STRETCH_BAR)),
-            "max_penetration": float(max(r["max_penetration"] for r in reports)),
-            "max_penetration_exact": float(max(r["max_penetration_exact"] for r in reports))}
+        by_id = {job.id: job for job in jobs}
+        summary["simulation"] = _simulation_figures(reports)
+        for key, group in (("by_garment_family", lambda job: garment_family(job.garment)),
+                           ("by_motion", lambda job: job.motion.kind)):
+            groups: dict[str, list[dict]] = {}
+            for report in reports:
+                groups.setdefault(group(by_id[report["id"]]), []).append(report)
+            summary["simulation"][key] = {name: _simulation_figures(members)
+                                          for name, members in sorted(groups.items())}
     with atomic_path(output / f"summary-shard{index}of{count}.json") as tmp:
         tmp.write_text(json.dumps(summary, indent=2))
     return summary
