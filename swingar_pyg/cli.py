@@ -61,7 +61,8 @@ def _simulate(args: argparse.Namespace) -> int:
             entry["slit"] = args.slit
         garment = fit_garment(garment_spec(entry), body, shape)
     motion = make_motion(args.motion, body, shape, seconds=args.seconds, fps=args.fps,
-                         speed=args.speed, amplitude=args.amplitude, mirror=args.mirror)
+                         speed=args.speed, amplitude=args.amplitude, mirror=args.mirror,
+                         arms_out_degrees=args.arms_out)
     solver = {"xpbd": XPBDSettings, "vbd": VBDSettings}[args.solver]
     steps = {name: value for name, value in (("substeps", args.substeps),
                                                ("iterations", args.iterations)) if value}
@@ -189,6 +190,9 @@ def build_parser() -> argparse.ArgumentParser:
     simulate.add_argument("--amplitude", type=float, default=1.0)
     simulate.add_argument("--speed", type=float, default=1.0)
     simulate.add_argument("--mirror", action="store_true")
+    simulate.add_argument("--arms-out", type=float, default=0.0, metavar="DEGREES",
+                          help="a captured clip's upper arms turned this far from the body "
+                               "(hands that swing into a skirt's hips stretch it)")
     simulate.add_argument("--garment", default=None, metavar="NAME",
                           help="a shipped MakeHuman piece (e.g. dress_skirt_knee, tshirt_loose, "
                                "overall_jumpsuit) fitted to the body; default: a procedural skirt "

@@ -105,14 +105,15 @@ def test_generation_resumes_and_merges(tmp_path):
     # A part made from another recipe (the config changed since) is simulated again: here
     # the test garment is longer, and a train part lost its recipe (as parts made before
     # recipes were recorded have none); the split files are merged from current parts.
-    # A part whose recipe predates a solver setting (here stall_ratio) was made as its
-    # default makes it: it is kept.
+    # A part whose recipe predates a solver or motion setting (here stall_ratio and
+    # arms_out) was made as its default makes it: it is kept.
     changed = tiny_config(tmp_path, TINY.replace('length: 0.6', 'length: 0.65'))
     with h5py.File(output / 'parts' / 'train' / 'train-00000.h5', 'a') as file:
         del file.attrs['recipe']
     with h5py.File(output / 'parts' / 'train' / 'train-00001.h5', 'a') as file:
         older = json.loads(file.attrs['recipe'])
         del older['solver']['stall_ratio']
+        del older['motion']['arms_out']
         file.attrs['recipe'] = json.dumps(older, sort_keys=True)
     with pytest.warns(UserWarning, match='2 part file'):
         third = make_dataset(changed, progress=False)
@@ -125,6 +126,7 @@ def test_generation_resumes_and_merges(tmp_path):
         assert file.attrs['recipe'] == job_recipe(plan_jobs(changed)[0], changed)
     with h5py.File(output / 'parts' / 'train' / 'train-00001.h5') as file:
         assert 'stall_ratio' not in json.loads(file.attrs['recipe'])['solver']
+        assert 'arms_out' not in json.loads(file.attrs['recipe'])['motion']
         assert np.array_equal(file['sequences'][next(iter(file['sequences']))]
                               ['garment_vertices'][:], reference)
 

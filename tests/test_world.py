@@ -363,3 +363,37 @@ def test_dress_hangs_from_the_chest_and_shipped_garments_pin_all_their_top_loops
     # the bib's top edge (292 vertices) and the eight strap ends (4 x 8 + 4 x 7), not only
     # the highest loop; the legs' hems (18 each, 1.2 m lower) stay free
     assert len(jumpsuit.pinned) == 292 + 4 * 8 + 4 * 7
+
+
+def test_arms_out_turns_both_upper_arms_away_symmetrically():
+    require('anny')
+    from swingar_pyg.world.body import AnnyBody
+    from swingar_pyg.world.motion import Motion, arms_out, mirror_motion
+    from swingar_pyg.world.motion_library import make_motion
+
+    body = AnnyBody()
+    shape = body.default_shape()
+    clip = make_motion('cmu_02_01_walk_delfem2', body, shape, seconds=1.0)
+    names = body.joint_names
+    hands = [names.index('LeftHand'), names.index('RightHand')]
+
+    def hand_x(motion):  # the hands' sideways distance from the root, per frame and side
+        posed = body.pose(shape, motion.rotations, motion.translation)
+        return (posed.joint_positions[:, hands, 0] - posed.joint_positions[:, :1, 0]).abs()
+
+    widths = [hand_x(arms_out(clip, degrees)) for degrees in (0, 10, 20)]
+    assert torch.equal(widths[0], hand_x(clip))
+    assert (widths[1] > widths[0] + 0.01).all() and (widths[2] > widths[1] + 0.01).all()
+    # the same turn on both sides: mirroring commutes with it
+    assert torch.allclose(mirror_motion(arms_out(clip, 15)).rotations,
+                          arms_out(mirror_motion(clip), 15).rotations, atol=1e-6)
+    eased = make_motion('cmu_02_01_walk_delfem2', body, shape, seconds=1.0, arms_out_degrees=20)
+    assert torch.allclose(eased.rotations[0], torch.eye(3).expand_as(eased.rotations[0]),
+                          atol=1e-6)  # still eased in from the rest pose
+    with pytest.raises(ValueError, match=r'arms_out must be in \[-45, 45\]'):
+        arms_out(clip, 60)
+    with pytest.raises(ValueError, match='applies to captured clips'):
+        make_motion('walk', body, shape, seconds=1.0, arms_out_degrees=10)
+    legs_only = Motion('legs', clip.rotations[:, :3], clip.translation, clip.fps, names[:3])
+    with pytest.raises(ValueError, match='upper-arm joints'):
+        arms_out(legs_only, 10)

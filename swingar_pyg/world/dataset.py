@@ -50,6 +50,7 @@ class MotionSpec:
     speed: float = 1.0
     amplitude: float = 1.0
     mirror: bool = False
+    arms_out: float = 0.0  # degrees, captured clips only (world.motion.arms_out)
 
 
 @dataclass(frozen=True)
@@ -140,9 +141,9 @@ def job_recipe(job: Job, config: DatasetConfig) -> str:
 
 
 def _is_current(part: Path, recipe: str) -> bool:
-    """Whether ``part`` exists and was made from ``recipe``. A solver setting the part's
-    recipe lacks counts as its default: settings are added with defaults that keep the
-    simulation as it was."""
+    """Whether ``part`` exists and was made from ``recipe``. A solver or motion setting
+    the part's recipe lacks counts as its default: settings are added with defaults that
+    keep the simulation as it was."""
     import h5py
 
     if not part.exists():
@@ -156,10 +157,13 @@ def _is_current(part: Path, recipe: str) -> bool:
 
 
 def _with_solver_defaults(recipe: str) -> dict:
-    """``recipe`` parsed, its solver settings completed by :class:`XPBDSettings`' defaults."""
+    """``recipe`` parsed, its solver settings and motion completed by the defaults of
+    :class:`XPBDSettings` and :class:`MotionSpec`."""
     defaults = json.loads(json.dumps(dataclasses.asdict(XPBDSettings())))
     parsed = json.loads(recipe)
     parsed["solver"] = {**defaults, **parsed["solver"]}
+    motion = dataclasses.asdict(MotionSpec(kind=parsed["motion"]["kind"]))
+    parsed["motion"] = {**motion, **parsed["motion"]}
     return parsed
 
 
@@ -172,7 +176,7 @@ def _run_job(job: Job, fps: float, seconds: float, solver: XPBDSettings, part: s
     garment = dataclasses.replace(garment, name=f"{garment.name}@shape{job.shape_index}")
     motion = make_motion(job.motion.kind, body, shape, seconds=seconds, fps=fps,
                          speed=job.motion.speed, amplitude=job.motion.amplitude,
-                         mirror=job.motion.mirror)
+                         mirror=job.motion.mirror, arms_out_degrees=job.motion.arms_out)
     sequence = simulate_sequence(body, shape, garment, motion, solver)
     sequence = sequence.with_exact_penetration(body.faces)
     write_sequences(part, [sequence], ids=[job.id], attrs={"recipe": recipe})

@@ -14,6 +14,7 @@ from swingar_pyg.world.motion import (
     EXTREME_MOTIONS,
     PROCEDURAL_MOTIONS,
     Motion,
+    arms_out,
     ease_from_rest,
     mirror_motion,
     procedural_motion,
@@ -29,7 +30,8 @@ def shipped_clips() -> list[str]:
 
 def make_motion(source: str, body: BodyModel, shape: torch.Tensor, seconds: float | None = None,
                 fps: float = 30.0, speed: float = 1.0, amplitude: float = 1.0,
-                mirror: bool = False, joint_map: dict[str, str] | None = None) -> Motion:
+                mirror: bool = False, joint_map: dict[str, str] | None = None,
+                arms_out_degrees: float = 0.0) -> Motion:
     """A motion for ``body`` from ``source``: a procedural family (see
     :data:`~swingar_pyg.world.motion.PROCEDURAL_MOTIONS`, or a stress case of
     :data:`~swingar_pyg.world.motion.EXTREME_MOTIONS`), a shipped clip name
@@ -39,11 +41,16 @@ def make_motion(source: str, body: BodyModel, shape: torch.Tensor, seconds: floa
     dropped, and the clip is eased into from the body's rest pose over 0.5 s (see
     :func:`~swingar_pyg.world.motion.ease_from_rest`); the result is cut to
     ``seconds`` (all of it if ``None`` or longer). ``speed`` plays it faster or
-    slower; ``amplitude`` applies to procedural motions only. ``joint_map`` names
-    clip joints for the body (:func:`~swingar_pyg.world.retarget.retarget`; e.g.
+    slower; ``amplitude`` applies to procedural motions only, ``arms_out_degrees`` to
+    clips only (their upper arms turned away from the body before the ease from rest:
+    :func:`~swingar_pyg.world.motion.arms_out`). ``joint_map`` names clip joints
+    for the body (:func:`~swingar_pyg.world.retarget.retarget`; e.g.
     :data:`~swingar_pyg.world.smpl_body.CMU_TO_SMPL`).
     """
     if source in PROCEDURAL_MOTIONS + EXTREME_MOTIONS:
+        if arms_out_degrees:
+            raise ValueError("arms_out_degrees applies to captured clips; procedural motions "
+                             "keep the arms clear of the body")
         return procedural_motion(source, body.joint_names, seconds=seconds or 4.0, fps=fps,
                                  amplitude=amplitude, speed=speed, mirror=mirror)
     if amplitude != 1.0:
@@ -65,8 +72,9 @@ def make_motion(source: str, body: BodyModel, shape: torch.Tensor, seconds: floa
     # Playing at `speed` is sampling the clip at fps / speed and calling it fps.
     motion = retarget(clip, body, shape, fps=fps / speed, joint_map=joint_map,
                       name=Path(source).stem)
-    motion = ease_from_rest(Motion(f"{motion.name}-s{speed:.2f}", motion.rotations[1:],
-                                   motion.translation[1:], fps, motion.joint_names))
+    motion = arms_out(Motion(f"{motion.name}-s{speed:.2f}", motion.rotations[1:],
+                             motion.translation[1:], fps, motion.joint_names), arms_out_degrees)
+    motion = ease_from_rest(motion)
     if seconds is not None:
         frames = max(2, round(seconds * fps))
         motion = Motion(motion.name, motion.rotations[:frames], motion.translation[:frames], fps,
