@@ -68,6 +68,16 @@ SIMULATOR_CASES: tuple[Case, ...] = (
          _simulator(bending="distance", bend_compliance=1e-6), bound=TORN),
     Case("simulator", "distance bending, legs split", "max edge strain",
          _simulator("leg_split", bending="distance"), bound=TORN, limitation=_OVER_CONSTRAINED),
+    # the datasets' path: the warp kernel, bending on one substep in ten (at 1e4x the
+    # stiffness too: the multirate bending must not overshoot)
+    Case("simulator", "warp kernel, bending every 10th substep, 1e4x stiffer", "max edge strain",
+         _simulator(backend="warp", bend_every=10, bend_stiffness=10.0), bound=TORN),
+    Case("simulator", "warp kernel, 100x heavier cloth", "max edge strain",
+         _simulator(backend="warp", bend_every=10, density=15.0), bound=TORN),
+    Case("simulator", "warp kernel, legs split", "max edge strain",
+         _simulator("leg_split", backend="warp", bend_every=10), bound=TORN),
+    Case("simulator", "warp kernel, fast spin (3 turns/s)", "max edge strain",
+         _simulator("spin_stop", speed=3.0, backend="warp", bend_every=10), bound=TORN),
 )
 
 VBD_CASES: tuple[Case, ...] = (
