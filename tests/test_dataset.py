@@ -162,3 +162,26 @@ def test_configs_take_dresses_and_shipped_garments(tmp_path):
         tiny_config(tmp_path, TINY.replace('{{length: 0.6,', '{{kind: cape, length: 0.6,'))
     with pytest.raises(ValueError, match='subdivisions'):
         ShippedGarmentSpec('overall_jumpsuit', 5)
+
+
+def test_a_split_of_blocks_pairs_each_block_and_keeps_earlier_jobs(tmp_path):
+    one = tiny_config(tmp_path)
+    blocks = TINY.replace("""  train:
+    garments:
+      - {{length: 0.4, flare: 0.3, vertices: 120}}
+      - {{length: 0.5, vertices: 150, jitter: 0.3}}
+    motions: [{{kind: sway}}]""", """  train:
+    - garments:
+        - {{length: 0.4, flare: 0.3, vertices: 120}}
+        - {{length: 0.5, vertices: 150, jitter: 0.3}}
+      motions: [{{kind: sway}}]
+    - garments: [{{length: 0.4, flare: 0.3, vertices: 120}}]
+      motions: [{{kind: cmu_02_01_walk_delfem2, arms_out: 20}}]""")
+    two = tiny_config(tmp_path, blocks)
+    before, after = plan_jobs(one), plan_jobs(two)
+    train = [job for job in after if job.split == 'train']
+    assert [(j.id, j.garment, j.motion) for j in before if j.split == 'train'] == \
+        [(j.id, j.garment, j.motion) for j in train[:2]]
+    assert len(train) == 3 and train[2].motion.arms_out == 20
+    assert two.garments['train'] == one.garments['train']  # each garment once
+    assert [m.kind for m in two.motions['train']] == ['sway', 'cmu_02_01_walk_delfem2']

@@ -55,16 +55,30 @@ class MotionSpec:
 
 @dataclass(frozen=True)
 class DatasetConfig:
-    """What to generate (see ``configs/data/*.yaml``)."""
+    """What to generate (see ``configs/data/*.yaml``). A split is ``{garments, motions}``
+    (every garment on every motion) or a list of such blocks, when some garments should
+    meet only some motions; a block appended later keeps the jobs of the ones before it."""
 
     name: str
     output: str
     seconds: float
     fps: float
     body_shapes: tuple[tuple[float, ...], ...]
-    garments: dict[str, tuple]
-    motions: dict[str, tuple[MotionSpec, ...]]
+    # per split, blocks of (garments, motions): each block's every garment on each motion
+    blocks: dict[str, tuple[tuple[tuple, tuple[MotionSpec, ...]], ...]]
     solver: XPBDSettings
+
+    @property
+    def garments(self) -> dict[str, tuple]:
+        """Per split, its garments (each once, in order)."""
+        return {split: tuple(dict.fromkeys(g for garments, _ in blocks for g in garments))
+                for split, blocks in self.blocks.items()}
+
+    @property
+    def motions(self) -> dict[str, tuple[MotionSpec, ...]]:
+        """Per split, its motions (each once, in order)."""
+        return {split: tuple(dict.fromkeys(m for _, motions in blocks for m in motions))
+                for split, blocks in self.blocks.items()}
 
     @classmethod
     def from_yaml(cls, path: str | Path) -> "DatasetConfig":
@@ -80,10 +94,11 @@ class DatasetConfig:
                 name=str(raw["name"]), output=str(raw["output"]),
                 seconds=float(raw["seconds"]), fps=float(raw.get("fps", 30.0)),
                 body_shapes=tuple(tuple(float(v) for v in s) for s in raw["body_shapes"]),
-                garments={split: tuple(garment_spec(g) for g in spec["garments"])
-                          for split, spec in splits.items()},
-                motions={split: tuple(MotionSpec(**m) for m in spec["motions"])
-                         for split, spec in splits.items()},
+                blocks={split: tuple(
+                    (tuple(garment_spec(g) for g in block["garments"]),
+                     tuple(MotionSpec(**m) for m in block["motions"]))
+                    for block in (spec if isinstance(spec, list) else [spec]))
+                    for split, spec in splits.items()},
                 solver=XPBDSettings(fps=float(raw.get("fps", 30.0)), **raw.get("solver", {})),
             )
         except KeyError as missing:
@@ -119,8 +134,9 @@ def plan_jobs(config: DatasetConfig) -> list[Job]:
                 seen[key] = split
     jobs = []
     for split in SPLITS:
-        combos = [(g, m, k) for g in config.garments.get(split, ())
-                  for m in config.motions.get(split, ()) for k in range(len(config.body_shapes))]
+        # block by block, so that a block appended to a split leaves the others' ids
+        combos = [(g, m, k) for garments, motions in config.blocks.get(split, ())
+                  for g in garments for m in motions for k in range(len(config.body_shapes))]
         jobs += [Job(split, i, g, m, k, config.body_shapes[k])
                  for i, (g, m, k) in enumerate(combos)]
     return jobs
