@@ -248,14 +248,21 @@ class WarpSubsteps:
     def _ints(self, tensor: Tensor) -> wp.array:
         return wp.from_torch(self._keep(tensor.to(torch.int32)))
 
-    def compliance(self, substeps: int, stretch_inverse: Tensor, bend_inverse: Tensor,
-                   hinge_compliance: Tensor) -> tuple:
-        """The per-substep-length arrays (``1 / (w_i + w_j + alpha)`` of stretch and
-        bend pairs, hinge compliances), made once per substep count."""
+    def compliance(self, substeps: int, stretch_colours: tuple, bend_colours: tuple,
+                   hinge_compliance: Tensor | None) -> tuple:
+        """The per-substep-length arrays, made once per substep count: each stretch and
+        bend pair's ``1 / (w_i + w_j + alpha)`` in solve order (from the torch path's
+        colours) and the hinge compliances (empty where this cloth has no hinges)."""
         if substeps not in self._per_substeps:
-            self._per_substeps[substeps] = (self._floats(stretch_inverse),
-                                            self._floats(bend_inverse),
-                                            self._floats(hinge_compliance))
+            def in_solve_order(colours: tuple) -> Tensor:
+                return (torch.cat([c.inverse_denominator for c in colours]) if colours
+                        else torch.zeros(0))
+
+            hinged = self.hinges[0].shape[0] > 0
+            self._per_substeps[substeps] = (
+                self._floats(in_solve_order(stretch_colours)),
+                self._floats(in_solve_order(bend_colours)),
+                self._floats(hinge_compliance if hinged else torch.zeros(0)))
         return self._per_substeps[substeps]
 
     def run(self, x: Tensor, v: Tensor, first: int, count: int, substeps: int,

@@ -455,12 +455,8 @@ class XPBDCloth:
         s = self.settings
         stretch_alpha, stretch_colours = step.stretch_colours
         bend_alpha, bend_colours = step.bend_colours or (0.0, ())
-        compliance = self._warp.compliance(
-            step.substeps, torch.cat([c.inverse_denominator for c in stretch_colours]),
-            torch.cat([c.inverse_denominator for c in bend_colours]) if bend_colours
-            else torch.zeros(0),
-            step.hinge_compliance if step.hinge_compliance is not None
-            and s.bend_stiffness > 0 else torch.zeros(0))
+        compliance = self._warp.compliance(step.substeps, stretch_colours, bend_colours,
+                                           step.hinge_compliance)
         contacts = None
         if track is not None:
             contacts = (track.start, track.end, track.start_normal, track.end_normal, body_step)

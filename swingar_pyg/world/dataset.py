@@ -169,10 +169,10 @@ def _is_current(part: Path, recipe: str) -> bool:
     if stored is None:
         return False
     # the config's own recipe, from job_recipe, already names every setting
-    return _with_solver_defaults(stored) == json.loads(recipe)
+    return _recipe_with_defaults(stored) == json.loads(recipe)
 
 
-def _with_solver_defaults(recipe: str) -> dict:
+def _recipe_with_defaults(recipe: str) -> dict:
     """``recipe`` parsed, its solver settings and motion completed by the defaults of
     :class:`XPBDSettings` and :class:`MotionSpec`."""
     defaults = json.loads(json.dumps(dataclasses.asdict(XPBDSettings())))
