@@ -1,6 +1,6 @@
 """The ``swingar`` command line.
 
-``fit``, ``validate``, ``test``, ``predict --ckpt`` and ``report`` import the
+``fit``, ``validate``, ``test``, ``predict``, ``report`` and ``ship-weights`` import the
 training layer (Lightning and jsonargparse, the ``train`` extra) when they run,
 so the other subcommands work without it.
 """
@@ -258,10 +258,16 @@ def build_parser() -> argparse.ArgumentParser:
     preview.set_defaults(run=_preview)
 
     predict = commands.add_parser(
-        "predict", help="animate any garment on any motion with a trained checkpoint and "
-                        "export OBJ frames (or PC2, USD), an .npz and a preview GIF (without "
-                        "--garment: Lightning's predict over a config's test split)")
-    predict.add_argument("--ckpt", required=True, help="a checkpoint of `swingar fit`")
+        "predict", help="animate any garment on any motion with the shipped base model (or a "
+                        "checkpoint) and export OBJ frames (or PC2, USD), an .npz and a "
+                        "preview GIF (without --garment: Lightning's predict over a config's "
+                        "test split)")
+    source = predict.add_mutually_exclusive_group()
+    source.add_argument("--ckpt", default=None, help="a checkpoint of `swingar fit`")
+    source.add_argument("--weights", default="base", metavar="NAME|PT",
+                        help="shipped weights by name or a `swingar ship-weights` .pt file, "
+                             "used without --ckpt (default: base; its model card is "
+                             "swingar_pyg/weights/base.md)")
     predict.add_argument("--garment", required=True,
                          help="an OBJ/PLY dressed on the rest body (metres, +Z up) or a "
                               "shipped garment name (e.g. dress_skirt_knee)")
@@ -293,6 +299,21 @@ def build_parser() -> argparse.ArgumentParser:
                              "config's (e.g. --seeds 0: one run per ablation)")
     report.set_defaults(run=_report)
 
+    ship = commands.add_parser(
+        "ship-weights", help="export a checkpoint as weights inside the package "
+                             "(swingar_pyg/weights/NAME.pt) and measure its model card "
+                             "(NAME.json, NAME.md) on a test split and a check slice")
+    ship.add_argument("--ckpt", required=True, help="a checkpoint of `swingar fit`")
+    ship.add_argument("--name", default="base")
+    ship.add_argument("--data", required=True, help="the dataset config it was trained on; "
+                                                    "its test split is measured")
+    ship.add_argument("--extra-test", action="append", default=[], metavar="LABEL=CONFIG",
+                      help="another dataset config whose test split is measured (repeatable)")
+    ship.add_argument("--command", dest="training_command", default=None,
+                      help="the training command, for the card")
+    ship.add_argument("--out-dir", default=None, help="default: swingar_pyg/weights")
+    ship.set_defaults(run=_ship_weights)
+
     quickstart = commands.add_parser(
         "quickstart", help="the main job: make the quickstart data, train the estimator, and "
                            "report its error and time against rigid skinning and the "
@@ -302,16 +323,20 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _predict(args: argparse.Namespace) -> int:
-    from swingar_pyg.training import load_body_sdf, load_estimator
+    from swingar_pyg.training import load_body_sdf, load_estimator, load_pretrained
 
     formats = parse_formats(args.formats or ["obj"])
     check_writers(formats)  # a missing usd-core fails before the checkpoint loads
-    estimator, data_settings = load_estimator(args.ckpt)
+    if args.ckpt:
+        estimator, data_settings = load_estimator(args.ckpt)
+    else:
+        estimator, data_settings = load_pretrained(args.weights)
     body_sdf = load_body_sdf(args.body_sdf) if args.body_sdf else None
     summary = predict_to_folder(estimator, args.garment, args.motion, args.out,
                                 args.body_shape, args.seconds, args.preview,
                                 collisions=args.collisions, body_sdf=body_sdf,
-                                data_settings=data_settings, checkpoint=args.ckpt,
+                                data_settings=data_settings,
+                                checkpoint=args.ckpt or f"weights: {args.weights}",
                                 formats=formats)
     print(stage_table([StageCost(**stage) for stage in summary["stages"]]))
     print(f"{summary['garment']} ({summary['vertices']} vertices) on {summary['motion']}: "
@@ -323,6 +348,23 @@ def _predict(args: argparse.Namespace) -> int:
               f"{counts['moved']} vertex-frames out of the body; inside before "
               f"{counts['inside_before']}, after {counts['inside_after']} (of "
               f"{counts['vertex_frames']}, by the exact SDF)")
+    return 0
+
+
+def _ship_weights(args: argparse.Namespace) -> int:
+    from swingar_pyg.eval.model_card import ship_weights
+    from swingar_pyg.models.pretrained import WEIGHTS_DIR
+
+    extra = {}
+    for item in args.extra_test:
+        label, sep, config = item.partition("=")
+        if not sep or not label or not config:
+            raise ValueError(f"--extra-test takes LABEL=CONFIG, got {item!r}")
+        extra[label] = config
+    card = ship_weights(args.ckpt, args.name, args.data, extra, args.training_command,
+                        args.out_dir or WEIGHTS_DIR)
+    print(card.with_suffix(".md").read_text())
+    print(f"wrote {card.with_suffix('.pt')}, {card} and {card.with_suffix('.md')}")
     return 0
 
 

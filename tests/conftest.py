@@ -39,3 +39,19 @@ def tiny_body_sdf(tiny_windows, tmp_path_factory):
     config.write_text(TINY_BODY_SDF.format(root=root, dataset=tiny_windows.hparams.config))
     assert main(['fit', '-c', 'configs/body_sdf.yaml', '-c', str(config)]) == 0
     return root / 'checkpoints' / 'last.ckpt'
+
+
+@pytest.fixture(scope='session')
+def tiny_checkpoint(tiny_windows, tmp_path_factory):
+    """A checkpoint of `swingar fit` (3 steps on the tiny dataset)."""
+    from swingar_pyg.cli import main
+    from tests.windows import SMALL_ESTIMATOR, SMALL_FEATURES
+
+    root = tmp_path_factory.mktemp('fit')
+    main(['fit', '-c', 'configs/quickstart.yaml', '--data.config', tiny_windows.hparams.config,
+          '--data.batch_size', '2', *[f'--data.{k}={v}' for k, v in SMALL_FEATURES.items()],
+          *[f'--model.estimator.init_args.{k}={v}' for k, v in SMALL_ESTIMATOR.items()],
+          '--trainer.max_steps', '3', '--trainer.limit_val_batches', '1',
+          '--trainer.log_every_n_steps', '1', '--trainer.enable_progress_bar', 'false',
+          '--trainer.enable_model_summary', 'false', '--trainer.default_root_dir', str(root)])
+    return root / 'checkpoints' / 'last.ckpt'

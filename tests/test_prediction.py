@@ -5,25 +5,14 @@ import pytest
 import torch
 
 from tests.extras import require
-from tests.windows import SMALL_ESTIMATOR, SMALL_FEATURES
 
 require('anny')
 require('lightning')
 
 
 @pytest.fixture(scope='module')
-def checkpoint(tiny_windows, tmp_path_factory):
-    """A checkpoint of `swingar fit` (3 steps on the tiny dataset)."""
-    from swingar_pyg.cli import main
-
-    root = tmp_path_factory.mktemp('fit')
-    main(['fit', '-c', 'configs/quickstart.yaml', '--data.config', tiny_windows.hparams.config,
-          '--data.batch_size', '2', *[f'--data.{k}={v}' for k, v in SMALL_FEATURES.items()],
-          *[f'--model.estimator.init_args.{k}={v}' for k, v in SMALL_ESTIMATOR.items()],
-          '--trainer.max_steps', '3', '--trainer.limit_val_batches', '1',
-          '--trainer.log_every_n_steps', '1', '--trainer.enable_progress_bar', 'false',
-          '--trainer.enable_model_summary', 'false', '--trainer.default_root_dir', str(root)])
-    return root / 'checkpoints' / 'last.ckpt'
+def checkpoint(tiny_checkpoint):
+    return tiny_checkpoint
 
 
 def test_predict_animates_a_garment_of_unseen_topology_from_an_obj(checkpoint, tmp_path):

@@ -42,6 +42,7 @@ from torch import Tensor, nn
 from torch_geometric.utils import add_remaining_self_loops
 
 from swingar_pyg.models.pose_features import pose_feature_size
+from swingar_pyg.models.pretrained import read_weights
 from swingar_pyg.nn import FCALSTM, FCAStack, attention_edge_index
 
 TARGET_FRAMES = 3
@@ -145,6 +146,19 @@ class SwinGarEstimator(nn.Module):
             if head is not None:
                 nn.init.zeros_(head.weight)
                 nn.init.zeros_(head.bias)
+
+    @classmethod
+    def from_pretrained(cls, name_or_path: str = "base") -> "SwinGarEstimator":
+        """A trained estimator, in eval mode: the weights shipped with the package
+        by name (``"base"``, see its model card ``swingar_pyg/weights/base.json``)
+        or a ``.pt`` file of ``swingar ship-weights``. A new garment's descriptor
+        must be computed with the settings in the file's ``data`` entry
+        (:func:`~swingar_pyg.training.load_pretrained` returns them; ``swingar
+        predict`` uses them)."""
+        record = read_weights(name_or_path)
+        estimator = cls(**record["estimator"])
+        estimator.load_state_dict(record["state_dict"])
+        return estimator.eval()
 
     def encode_garment(self, data) -> tuple[Tensor, Tensor, Tensor]:
         """The motion-independent part: attention graph, :math:`M_g` features

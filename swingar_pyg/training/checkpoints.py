@@ -7,7 +7,9 @@ from pathlib import Path
 
 import torch
 
+from swingar_pyg.geometry.spectral import DESCRIPTOR_SIGMA
 from swingar_pyg.models import BodySDF, SwinGarEstimator
+from swingar_pyg.models.pretrained import read_weights, write_weights
 from swingar_pyg.training.body_sdf_module import BodySDFModule
 from swingar_pyg.training.module import SwinGarModule
 
@@ -27,6 +29,37 @@ def load_estimator(checkpoint: str | Path) -> tuple[SwinGarEstimator, dict]:
     saved = torch.load(path, map_location="cpu", weights_only=False)
     module = SwinGarModule.load_from_checkpoint(path, map_location="cpu")
     return module.estimator.eval(), saved.get("datamodule_hyper_parameters", {})
+
+
+def load_pretrained(name_or_path: str = "base") -> tuple[SwinGarEstimator, dict]:
+    """A shipped estimator (by name) or a weights file (``.pt``), in eval mode, and
+    the descriptor settings (``sigma``, ``seed``) it was trained with: the pair
+    :func:`load_estimator` returns for a checkpoint."""
+    return SwinGarEstimator.from_pretrained(name_or_path), read_weights(name_or_path)["data"]
+
+
+def export_weights(checkpoint: str | Path, out: str | Path) -> dict:
+    """Writes the estimator of a ``swingar fit`` checkpoint as a weights file
+    (:mod:`swingar_pyg.models.pretrained`); returns what the model card needs
+    from the checkpoint: the estimator's arguments, the data and training
+    hyperparameters, and the step."""
+    path = _existing(checkpoint, "no checkpoint")
+    saved = torch.load(path, map_location="cpu", weights_only=False)
+    network = saved["hyper_parameters"].get("estimator")
+    if not isinstance(network, dict) or "init_args" not in network:
+        raise ValueError(f"{checkpoint} was not written by `swingar fit` with a config "
+                         "(its hyperparameters lack the estimator's init_args)")
+    arguments = dict(network["init_args"])
+    data = saved.get("datamodule_hyper_parameters", {})
+    settings = {"sigma": float(data.get("sigma", DESCRIPTOR_SIGMA)),
+                "seed": int(data.get("seed", 0))}
+    estimator, _ = load_estimator(path)
+    write_weights(out, arguments, estimator.state_dict(), settings)
+    training = {k: v for k, v in saved["hyper_parameters"].items()
+                if k != "estimator" and not k.startswith("_")}
+    return {"estimator": arguments, "data": settings, "training": training,
+            "datamodule": {k: v for k, v in data.items() if not k.startswith("_")},
+            "step": int(saved["global_step"])}
 
 
 def load_body_sdf(checkpoint: str | Path) -> BodySDF:

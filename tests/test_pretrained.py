@@ -1,0 +1,103 @@
+"""Weights files and `swingar ship-weights` (export and model card)."""
+import json
+
+import pytest
+import torch
+
+from tests.extras import require
+from tests.windows import SMALL_ESTIMATOR
+
+
+def _small_estimator():
+    from swingar_pyg.models import SwinGarEstimator
+
+    estimator = SwinGarEstimator(**SMALL_ESTIMATOR)
+    with torch.no_grad():  # the zero-initialised heads would hide a lost parameter
+        for parameter in estimator.parameters():
+            parameter.add_(0.1 * torch.randn_like(parameter))
+    return estimator.eval()
+
+
+def test_a_weights_file_round_trips_the_estimator(tmp_path):
+    from swingar_pyg.models import SwinGarEstimator
+    from swingar_pyg.models.pretrained import read_weights, write_weights
+
+    estimator = _small_estimator()
+    path = write_weights(tmp_path / 'mine.pt', SMALL_ESTIMATOR, estimator.state_dict(),
+                         {'sigma': 0.1, 'seed': 3})
+    loaded = SwinGarEstimator.from_pretrained(path)
+    assert not loaded.training
+    assert read_weights(path)['data'] == {'sigma': 0.1, 'seed': 3}
+    for name, value in estimator.state_dict().items():
+        assert torch.equal(loaded.state_dict()[name], value), name
+    assert [p.name for p in tmp_path.iterdir()] == ['mine.pt']  # no temporary left
+
+
+def test_bad_weights_are_refused_with_the_reason(tmp_path):
+    from swingar_pyg.models import SwinGarEstimator
+    from swingar_pyg.models.pretrained import WEIGHTS_FORMAT
+
+    with pytest.raises(ValueError, match="no shipped weights named 'nope'"):
+        SwinGarEstimator.from_pretrained('nope')
+    with pytest.raises(ValueError, match='no weights file'):
+        SwinGarEstimator.from_pretrained(str(tmp_path / 'missing.pt'))
+    (tmp_path / 'cut.pt').write_bytes(b'PK\x03\x04 half a file')
+    with pytest.raises(ValueError, match='not a readable weights file'):
+        SwinGarEstimator.from_pretrained(str(tmp_path / 'cut.pt'))
+    torch.save({'state_dict': {}}, tmp_path / 'bare.pt')
+    with pytest.raises(ValueError, match=r"lacks \['format', 'estimator', 'data'\]"):
+        SwinGarEstimator.from_pretrained(str(tmp_path / 'bare.pt'))
+    torch.save({'format': WEIGHTS_FORMAT + 1, 'estimator': {}, 'state_dict': {}, 'data': {}},
+               tmp_path / 'future.pt')
+    with pytest.raises(ValueError, match='weights format 2'):
+        SwinGarEstimator.from_pretrained(str(tmp_path / 'future.pt'))
+
+
+def test_weights_files_run_no_pickled_code(tmp_path):
+    from swingar_pyg.models import SwinGarEstimator
+
+    class Payload:
+        def __reduce__(self):
+            return (print, ('ran',))
+
+    torch.save({'format': 1, 'estimator': {}, 'state_dict': {}, 'data': Payload()},
+               tmp_path / 'evil.pt')
+    with pytest.raises(ValueError, match='not a readable weights file'):
+        SwinGarEstimator.from_pretrained(str(tmp_path / 'evil.pt'))
+
+
+TINY_CHECK_SLICE = {
+    'name': 'tiny-check', 'seconds': 0.3, 'fps': 30,
+    'solver': {'substeps': 10, 'iterations': 2, 'settle_frames': 10},
+    'body_shapes': [[0.5, 0.5, 0.5, 0.5, 0.5, 0.5]],
+    'splits': {'test': {'garments': [{'length': 0.5, 'flare': 0.35, 'vertices': 110}],
+                        'motions': [{'kind': 'kick'}]}},
+}
+
+
+def test_ship_weights_writes_weights_and_a_card_that_re_measures(tiny_checkpoint, tiny_windows,
+                                                                 tmp_path):
+    require('anny')
+    require('lightning')
+    from swingar_pyg.eval.model_card import check_slice_figures, ship_weights
+    from swingar_pyg.training import load_estimator, load_pretrained
+
+    card_path = ship_weights(tiny_checkpoint, 'tiny', tiny_windows.hparams.config,
+                             extra_tests={'again': tiny_windows.hparams.config},
+                             command='swingar fit (3 steps)', out_dir=tmp_path,
+                             check_slice=TINY_CHECK_SLICE, progress=False)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['tiny.json', 'tiny.md', 'tiny.pt']
+    card = json.loads(card_path.read_text())
+    assert card['training']['step'] == 3 and card['data']['simulator_revision'] >= 8
+    shipped, data = load_pretrained(tmp_path / 'tiny.pt')
+    trained, _ = load_estimator(tiny_checkpoint)
+    for name, value in trained.state_dict().items():
+        assert torch.equal(shipped.state_dict()[name], value), name
+    test = card['figures']['test']
+    assert set(test) == {'all', 'skirt'} and test['all'] == test['skirt']
+    assert card['figures']['again'] == test  # the same split measured twice
+    assert 0 < test['all']['rigid_mean_mm'] and 0 < test['all']['estimator_mean_mm']
+    again = check_slice_figures(shipped, data, recipe=card['check_slice']['recipe'])
+    assert again == card['check_slice']['figures']  # deterministic on one machine
+    markdown = (tmp_path / 'tiny.md').read_text()
+    assert f"{test['all']['estimator_mean_mm']:.1f}" in markdown
