@@ -333,3 +333,14 @@ def test_datamodule_warns_about_sequences_from_an_older_simulator(tiny_windows, 
         del next(iter(file['sequences'].values())).attrs['simulator_revision']
     with pytest.warns(UserWarning, match=r'simulator revision\(s\) \[0\]'):
         module.prepare_data()
+
+
+def test_error_statistics_match_torch_and_take_a_large_test_split():
+    from swingar_pyg.training.vertex_errors import error_stats
+
+    errors = torch.rand(1001, dtype=torch.float64) * 50
+    stats = error_stats(errors)
+    assert stats['p95_mm'] == pytest.approx(float(torch.quantile(errors, 0.95)), rel=1e-12)
+    assert stats['rmse_mm'] == pytest.approx(float(errors.square().mean().sqrt()))
+    large = torch.arange(2**24 + 3, dtype=torch.float32)  # torch.quantile refuses this many
+    assert error_stats(large)['p95_mm'] == pytest.approx(0.95 * (2**24 + 2), rel=1e-9)

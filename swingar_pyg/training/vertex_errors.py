@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections import defaultdict
 
+import numpy as np
 import torch
 from torch import Tensor
 
@@ -14,10 +15,12 @@ def garment_family(name: str) -> str:
 
 
 def error_stats(errors_mm: Tensor) -> dict[str, float]:
-    """Mean, RMSE and 95th percentile of per-vertex errors (mm)."""
-    errors = errors_mm.double()
+    """Mean, RMSE and 95th percentile of per-vertex errors (mm). The percentile
+    is numpy's (linear interpolation, as :func:`torch.quantile`, which refuses
+    more than 2**24 values: a test split of 100 sequences has more)."""
+    errors = errors_mm.detach().double().cpu()
     return {"mean_mm": float(errors.mean()), "rmse_mm": float(errors.square().mean().sqrt()),
-            "p95_mm": float(torch.quantile(errors, 0.95))}
+            "p95_mm": float(np.quantile(errors.numpy(), 0.95))}
 
 
 class VertexErrors:
