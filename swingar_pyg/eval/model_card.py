@@ -8,7 +8,7 @@ and what it measured on the test split and on extra test splits: per garment
 family, the streamed estimator's mean and p95 vertex error against rigid
 skinning's. It also records the figures of a **check slice**, a one-sequence
 dataset recipe small enough to simulate in a unit test, so a test can
-re-measure the shipped weights and compare (``tests/test_pretrained.py``).
+re-measure the shipped weights and compare (``tests/test_shipped_model.py``).
 """
 
 from __future__ import annotations
@@ -200,6 +200,6 @@ def card_markdown(card: dict) -> str:
     for label, figures in card["figures"].items():
         lines += [f"### {label}", "", *_figure_table(figures), ""]
     lines += ["### Check slice", "",
-              "One unseen sequence re-simulated and re-measured by `tests/test_pretrained.py`:",
+              "One unseen sequence re-simulated and re-measured by `tests/test_shipped_model.py`:",
               "", *_figure_table(card["check_slice"]["figures"]), ""]
     return "\n".join(lines)
