@@ -74,7 +74,7 @@ def test_predict_without_a_checkpoint_uses_the_shipped_model(tmp_path, capsys):
     vertices = torch.as_tensor(np.load(out / 'garment.npz')['vertices'])
     assert vertices.shape == (30, skirt.mesh.num_vertices, 3) and torch.isfinite(vertices).all()
     # near the body: each vertex within 10 cm of where it stands off the rest body (the
-    # shipped model's swinging hem measured 7.3 cm; the ground truth swings as far)
+    # shipped model measured 7.3 cm at the swinging hem; a broken model flies off)
     clip = make_motion('walk', body, shape, seconds=1.0)
     posed = body.pose(shape, clip.rotations, clip.translation).vertices
     nearest = torch.cdist(vertices.to(posed.dtype), posed).min(dim=-1).values
