@@ -1,6 +1,7 @@
 import csv
 import importlib.util
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -153,11 +154,14 @@ def test_equal_error_speedup_interpolates_the_simulator_curve():
 
 
 def test_report_configs_parse_and_bad_ones_are_refused(tmp_path):
-    from swingar_pyg.eval.report import ReportConfig
+    from swingar_pyg.eval.report import ReportConfig, _run_folder
 
-    for name in ('quickstart', 'ablations'):
+    for name in ('quickstart', 'ablations', 'base', 'ablations_base'):
         config = ReportConfig.from_yaml(f'configs/report/{name}.yaml')
         assert config.models and config.output.startswith('runs/report/')
+        folders = [_run_folder(m.configs, seed)[0] for m in config.models for seed in m.seeds]
+        assert len(set(folders)) == len(folders), name  # no two runs share a folder
+        assert all(Path(c).is_file() for m in config.models for c in m.configs)
     ablations = ReportConfig.from_yaml('configs/report/ablations.yaml')
     assert ablations.stability == 'off' and len(ablations.models) == 7
     one_seed = ablations.with_seeds((0,))
