@@ -264,7 +264,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "test split)")
     source = predict.add_mutually_exclusive_group()
     source.add_argument("--ckpt", default=None, help="a checkpoint of `swingar fit`")
-    source.add_argument("--weights", default="base", metavar="NAME|PT",
+    source.add_argument("--weights", default=None, metavar="NAME|PT",
                         help="shipped weights by name or a `swingar ship-weights` .pt file, "
                              "used without --ckpt (default: base; its model card is "
                              "swingar_pyg/weights/base.md)")
@@ -330,13 +330,13 @@ def _predict(args: argparse.Namespace) -> int:
     if args.ckpt:
         estimator, data_settings = load_estimator(args.ckpt)
     else:
-        estimator, data_settings = load_pretrained(args.weights)
+        estimator, data_settings = load_pretrained(args.weights or "base")
     body_sdf = load_body_sdf(args.body_sdf) if args.body_sdf else None
     summary = predict_to_folder(estimator, args.garment, args.motion, args.out,
                                 args.body_shape, args.seconds, args.preview,
                                 collisions=args.collisions, body_sdf=body_sdf,
                                 data_settings=data_settings,
-                                checkpoint=args.ckpt or f"weights: {args.weights}",
+                                checkpoint=args.ckpt or f"weights: {args.weights or 'base'}",
                                 formats=formats)
     print(stage_table([StageCost(**stage) for stage in summary["stages"]]))
     print(f"{summary['garment']} ({summary['vertices']} vertices) on {summary['motion']}: "

@@ -101,3 +101,19 @@ def test_ship_weights_writes_weights_and_a_card_that_re_measures(tiny_checkpoint
     assert again == card['check_slice']['figures']  # deterministic on one machine
     markdown = (tmp_path / 'tiny.md').read_text()
     assert f"{test['all']['estimator_mean_mm']:.1f}" in markdown
+
+
+def test_ship_weights_cli_refuses_bad_arguments_before_any_work(tmp_path, capsys):
+    require('lightning')
+    from swingar_pyg.cli import main
+
+    for arguments, message in (
+            (['--ckpt', 'x.ckpt', '--extra-test', 'nolabel'], '--extra-test takes LABEL=CONFIG'),
+            (['--ckpt', str(tmp_path / 'none.ckpt')], 'no checkpoint at')):
+        with pytest.raises(SystemExit):
+            main(['ship-weights', *arguments, '--data', 'd.yaml', '--out-dir', str(tmp_path)])
+        assert message in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
+    with pytest.raises(SystemExit):  # a checkpoint or shipped weights, not both
+        main(['predict', '--ckpt', 'a.ckpt', '--weights', 'base', '--garment', 'g.obj'])
+    assert 'not allowed with argument' in capsys.readouterr().err
