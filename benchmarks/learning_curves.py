@@ -15,16 +15,19 @@ from common import write_results
 
 
 def validation_rows(run: Path) -> list[dict]:
-    """Every validation step of a run: step, and the ``val/...`` figures logged there."""
-    logs = sorted(run.glob("logs/version_*/metrics.csv"))
+    """Every validation step of a run, over all its log versions (a resumed run
+    logs to a new one; a step logged twice keeps its latest figures)."""
+    logs = sorted(run.glob("logs/version_*/metrics.csv"),
+                  key=lambda path: int(path.parent.name.split("_")[1]))
     if not logs:
         raise ValueError(f"{run} has no logs/version_*/metrics.csv")
-    rows = []
-    for row in csv.DictReader(logs[-1].open()):
-        if row.get("val/estimator_mean_mm"):
-            rows.append({"step": int(row["step"]) + 1,
-                         **{k: float(v) for k, v in row.items() if k.startswith("val/") and v}})
-    return rows
+    by_step = {}
+    for log in logs:
+        for row in csv.DictReader(log.open()):
+            if row.get("val/estimator_mean_mm"):
+                by_step[int(row["step"]) + 1] = {
+                    k: float(v) for k, v in row.items() if k.startswith("val/") and v}
+    return [{"step": step, **figures} for step, figures in sorted(by_step.items())]
 
 
 def main() -> None:
@@ -46,10 +49,13 @@ def main() -> None:
     for axis, panel in zip(axes[0], panels):
         prefix = "val/" if panel == "all" else f"val/{panel}/"
         for run, rows in curves.items():
+            rows = [r for r in rows if f"{prefix}estimator_mean_mm" in r]
             axis.plot([r["step"] for r in rows], [r[f"{prefix}estimator_mean_mm"] for r in rows],
                       marker="o", label=run)
-        rigid = next(iter(curves.values()))[0][f"{prefix}rigid_mean_mm"]
-        axis.axhline(rigid, color="grey", linestyle="--", label="rigid skinning")
+        rigid = [r[f"{prefix}rigid_mean_mm"] for rows in curves.values() for r in rows
+                 if f"{prefix}rigid_mean_mm" in r]
+        if rigid:  # the same validation split in every run
+            axis.axhline(rigid[0], color="grey", linestyle="--", label="rigid skinning")
         axis.set(title=f"validation, {panel}", xlabel="step", ylabel="mean vertex error (mm)")
         axis.grid(alpha=0.3)
     axes[0][0].legend(fontsize=8)

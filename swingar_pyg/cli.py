@@ -304,7 +304,9 @@ def build_parser() -> argparse.ArgumentParser:
                              "(swingar_pyg/weights/NAME.pt) and measure its model card "
                              "(NAME.json, NAME.md) on a test split and a check slice")
     ship.add_argument("--ckpt", required=True, help="a checkpoint of `swingar fit`")
-    ship.add_argument("--name", default="base")
+    ship.add_argument("--name", required=True,
+                      help="the weights' name: NAME.pt, NAME.json and NAME.md (the package "
+                           "ships `base`; writing it replaces the shipped model)")
     ship.add_argument("--data", required=True, help="the dataset config it was trained on; "
                                                     "its test split is measured")
     ship.add_argument("--extra-test", action="append", default=[], metavar="LABEL=CONFIG",

@@ -1,5 +1,6 @@
 """Weights files and `swingar ship-weights` (export and model card)."""
 import json
+from pathlib import Path
 
 import pytest
 import torch
@@ -53,7 +54,7 @@ def test_bad_weights_are_refused_with_the_reason(tmp_path):
         SwinGarEstimator.from_pretrained(str(tmp_path / 'future.pt'))
 
 
-def test_weights_files_run_no_pickled_code(tmp_path):
+def test_weights_files_run_no_pickled_code(tmp_path, capsys):
     from swingar_pyg.models import SwinGarEstimator
 
     class Payload:
@@ -64,6 +65,7 @@ def test_weights_files_run_no_pickled_code(tmp_path):
                tmp_path / 'evil.pt')
     with pytest.raises(ValueError, match='not a readable weights file'):
         SwinGarEstimator.from_pretrained(str(tmp_path / 'evil.pt'))
+    assert 'ran' not in capsys.readouterr().out
 
 
 TINY_CHECK_SLICE = {
@@ -88,7 +90,8 @@ def test_ship_weights_writes_weights_and_a_card_that_re_measures(tiny_checkpoint
                              check_slice=TINY_CHECK_SLICE, progress=False)
     assert sorted(p.name for p in tmp_path.iterdir()) == ['tiny.json', 'tiny.md', 'tiny.pt']
     card = json.loads(card_path.read_text())
-    assert card['training']['step'] == 3 and card['data']['simulator_revision'] >= 8
+    assert card['training']['step'] == 3 and card['data']['simulator_revisions'] == [
+        card['check_slice']['simulator_revision']]
     shipped, data = load_pretrained(tmp_path / 'tiny.pt')
     trained, _ = load_estimator(tiny_checkpoint)
     for name, value in trained.state_dict().items():
@@ -108,12 +111,41 @@ def test_ship_weights_cli_refuses_bad_arguments_before_any_work(tmp_path, capsys
     from swingar_pyg.cli import main
 
     for arguments, message in (
-            (['--ckpt', 'x.ckpt', '--extra-test', 'nolabel'], '--extra-test takes LABEL=CONFIG'),
-            (['--ckpt', str(tmp_path / 'none.ckpt')], 'no checkpoint at')):
+            (['--extra-test', 'nolabel'], '--extra-test takes LABEL=CONFIG'),
+            (['--name', 'base.pt'], 'a weights name is a bare file stem'),
+            (['--name', '../x'], 'a weights name is a bare file stem'),
+            (['--data', str(tmp_path / 'none.yaml')], 'no dataset config at')):
         with pytest.raises(SystemExit):
-            main(['ship-weights', *arguments, '--data', 'd.yaml', '--out-dir', str(tmp_path)])
+            main(['ship-weights', '--ckpt', 'x.ckpt', '--name', 'x', '--data', 'd.yaml',
+                  *arguments, '--out-dir', str(tmp_path)])
         assert message in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []
     with pytest.raises(SystemExit):  # a checkpoint or shipped weights, not both
         main(['predict', '--ckpt', 'a.ckpt', '--weights', 'base', '--garment', 'g.obj'])
     assert 'not allowed with argument' in capsys.readouterr().err
+
+
+def test_ship_weights_leaves_nothing_when_it_fails(tiny_checkpoint, tiny_windows, tmp_path):
+    require('anny')
+    require('lightning')
+    from swingar_pyg.eval.model_card import ship_weights
+
+    other = tmp_path / 'other.yaml'  # a valid config, but not the checkpoint's data
+    other.write_text(Path(tiny_windows.hparams.config).read_text())
+    out = tmp_path / 'weights'
+    out.mkdir()
+    (out / 'tiny.json').write_text('{"the": "old card"}')
+    with pytest.raises(ValueError, match='was trained on'):
+        ship_weights(tiny_checkpoint, 'tiny', other, out_dir=out, progress=False)
+    with pytest.raises(ValueError, match='no dataset config at'):
+        ship_weights(tiny_checkpoint, 'tiny', tiny_windows.hparams.config,
+                     extra_tests={'missing': str(tmp_path / 'missing.yaml')}, out_dir=out,
+                     progress=False)
+    unmade = tmp_path / 'unmade.yaml'  # its data were never simulated
+    unmade.write_text(other.read_text().replace(str(Path(tiny_windows.hparams.config).parent),
+                                                str(tmp_path / 'nowhere')))
+    with pytest.raises(ValueError, match='no test split at .*swingar make-dataset'):
+        ship_weights(tiny_checkpoint, 'tiny', tiny_windows.hparams.config,
+                     extra_tests={'unmade': str(unmade)}, out_dir=out, progress=False)
+    assert [p.name for p in out.iterdir()] == ['tiny.json']
+    assert (out / 'tiny.json').read_text() == '{"the": "old card"}'

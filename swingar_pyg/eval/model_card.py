@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 import tempfile
 from collections import defaultdict
 from pathlib import Path
@@ -22,7 +23,6 @@ from pathlib import Path
 import torch
 import yaml
 
-from swingar_pyg.atomic import atomic_path
 from swingar_pyg.eval.error_vs_time import (
     MethodResult,
     TestSequence,
@@ -36,6 +36,7 @@ from swingar_pyg.sim import SIMULATOR_REVISION
 from swingar_pyg.training import export_weights, garment_family, load_pretrained
 from swingar_pyg.world.body import AnnyBody
 from swingar_pyg.world.dataset import DatasetConfig, make_dataset
+from swingar_pyg.world.sequence_file import simulator_revisions
 
 # An unseen skirt (not in the base data) on an unseen motion, 2 s: about a minute to
 # simulate and measure on one core.
@@ -107,58 +108,84 @@ def _sha256(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
+def check_weights_name(name: str) -> str:
+    """A weights name is a file stem: no folders, no suffix."""
+    if not name or Path(name).name != name or name.endswith((".pt", ".json", ".md")):
+        raise ValueError(f"a weights name is a bare file stem like 'mine', got {name!r}")
+    return name
+
+
+def _test_split(config_path: str | Path) -> tuple[DatasetConfig, Path]:
+    if not Path(config_path).is_file():
+        raise ValueError(f"no dataset config at {config_path}")
+    config = DatasetConfig.from_yaml(config_path)
+    path = Path(config.output) / "test.h5"
+    if not path.exists():
+        raise ValueError(f"no test split at {path}; make it first with `swingar make-dataset -c "
+                         f"{config_path}` (it simulates every split of the config)")
+    return config, path
+
+
 def ship_weights(checkpoint: str | Path, name: str, dataset: str | Path,
                  extra_tests: dict[str, str] | None = None, command: str | None = None,
                  out_dir: str | Path = WEIGHTS_DIR, check_slice: dict = CHECK_SLICE,
                  progress: bool = True) -> Path:
     """Exports ``checkpoint`` as ``<out_dir>/<name>.pt``, measures it on the test
-    split of ``dataset`` (generated if missing), on each of ``extra_tests``
+    split of ``dataset`` (the config it was trained on), on each of ``extra_tests``
     (``{label: dataset config}``) and on ``check_slice`` (a dataset recipe with one
     test split), and writes the card ``<name>.json`` and ``<name>.md``. Returns
-    the card's path."""
+    the card's path.
+
+    Every config and test split is read before anything is written, and the three
+    files are moved into place only once all is measured: a failure leaves the
+    folder as it was."""
+    check_weights_name(name)
     out_dir = Path(out_dir)
-    weights = out_dir / f"{name}.pt"
-    provenance = export_weights(checkpoint, weights)
-    estimator, data_settings = load_pretrained(weights)
     body = AnnyBody()
-
-    def test_split(config_path) -> tuple[DatasetConfig, list[TestSequence]]:
-        config = DatasetConfig.from_yaml(config_path)
-        path = Path(config.output) / "test.h5"
-        if not path.exists():
-            make_dataset(config, workers=2, progress=progress)
-        return config, load_test_sequences(path, body)
-
-    config, sequences = test_split(dataset)
-    figures = {"test": measure(estimator, data_settings, sequences, progress)}
-    for label, extra in (extra_tests or {}).items():
-        figures[label] = measure(estimator, data_settings, test_split(extra)[1], progress)
-    check = check_slice_figures(estimator, data_settings, body, check_slice, progress)
-    card = {
-        "name": name, "weights": weights.name, "sha256": _sha256(weights),
-        "parameters": sum(p.numel() for p in estimator.parameters()),
-        "estimator": provenance["estimator"], "descriptor": provenance["data"],
-        "data": {"config": str(dataset), "name": config.name,
-                 "simulator_revision": SIMULATOR_REVISION,
-                 "solver": {k: getattr(config.solver, k) for k in
-                            ("substeps", "iterations", "max_substeps", "backend",
-                             "bend_every")},
-                 "garments": {split: len(g) for split, g in config.garments.items()},
-                 "motions": {split: [m.kind for m in ms] for split, ms in config.motions.items()},
-                 "body_shapes": len(config.body_shapes)},
-        "training": {"command": command, "checkpoint": str(checkpoint),
-                     "step": provenance["step"], "module": provenance["training"],
-                     "datamodule": provenance["datamodule"]},
-        "figures": figures,
-        "check_slice": {"recipe": check_slice, "figures": check},
-        "torch": torch.__version__,
-    }
-    path = out_dir / f"{name}.json"
-    with atomic_path(path) as tmp:
-        tmp.write_text(json.dumps(card, indent=2, default=str) + "\n")
-    with atomic_path(out_dir / f"{name}.md") as tmp:
-        tmp.write_text(card_markdown(card))
-    return path
+    config, test_path = _test_split(dataset)
+    extra_paths = {label: _test_split(path)[1]
+                   for label, path in (extra_tests or {}).items()}
+    out_dir.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=out_dir, prefix=f".{name}-") as staging:
+        staged = Path(staging)
+        provenance = export_weights(checkpoint, staged / f"{name}.pt")
+        trained_on = provenance["datamodule"].get("config")
+        if trained_on is not None and Path(trained_on).resolve() != Path(dataset).resolve():
+            raise ValueError(f"{checkpoint} was trained on {trained_on}, not {dataset}: "
+                             "measure it on the test split of its own data")
+        estimator, data_settings = load_pretrained(staged / f"{name}.pt")
+        figures = {"test": measure(estimator, data_settings, load_test_sequences(test_path, body),
+                                   progress)}
+        for label, path in extra_paths.items():
+            figures[label] = measure(estimator, data_settings, load_test_sequences(path, body),
+                                     progress)
+        check = check_slice_figures(estimator, data_settings, body, check_slice, progress)
+        card = {
+            "name": name, "weights": f"{name}.pt", "sha256": _sha256(staged / f"{name}.pt"),
+            "parameters": sum(p.numel() for p in estimator.parameters()),
+            "estimator": provenance["estimator"], "descriptor": provenance["data"],
+            "data": {"config": str(dataset), "name": config.name,
+                     "simulator_revisions": sorted(simulator_revisions(test_path)),
+                     "solver": {k: getattr(config.solver, k) for k in
+                                ("substeps", "iterations", "max_substeps", "backend",
+                                 "bend_every")},
+                     "garments": {split: len(g) for split, g in config.garments.items()},
+                     "motions": {split: [m.kind for m in ms]
+                                 for split, ms in config.motions.items()},
+                     "body_shapes": len(config.body_shapes)},
+            "training": {"command": command, "checkpoint": str(checkpoint),
+                         "step": provenance["step"], "module": provenance["training"],
+                         "datamodule": provenance["datamodule"]},
+            "figures": figures,
+            "check_slice": {"recipe": check_slice, "simulator_revision": SIMULATOR_REVISION,
+                            "figures": check},
+            "torch": torch.__version__,
+        }
+        (staged / f"{name}.json").write_text(json.dumps(card, indent=2, default=str) + "\n")
+        (staged / f"{name}.md").write_text(card_markdown(card))
+        for suffix in (".pt", ".json", ".md"):
+            os.replace(staged / f"{name}{suffix}", out_dir / f"{name}{suffix}")
+    return out_dir / f"{name}.json"
 
 
 def _figure_table(figures: dict) -> list[str]:
@@ -185,14 +212,15 @@ def card_markdown(card: dict) -> str:
         "```json", json.dumps(card["estimator"], indent=1), "```", "",
         f"Descriptor: sigma {card['descriptor']['sigma']}, seed {card['descriptor']['seed']}.", "",
         "## Training data", "",
-        f"`{data['config']}` (simulator revision {data['simulator_revision']}, solver "
+        f"`{data['config']}` (test split made by simulator revision(s) "
+        f"{data['simulator_revisions']}, solver "
         f"{data['solver']}): garments per split {data['garments']}, "
         f"{data['body_shapes']} body shapes, motions per split:", "",
         *[f"- {split}: {', '.join(dict.fromkeys(kinds))}"
           for split, kinds in data["motions"].items()], "",
         "## Training", "",
-        f"`{training['command']}`, step {training['step']} (the checkpoint with the best "
-        f"validation error), module arguments `{json.dumps(training['module'])}`.", "",
+        f"`{training['command']}`: checkpoint `{training['checkpoint']}`, step "
+        f"{training['step']}, module arguments `{json.dumps(training['module'])}`.", "",
         "## Figures", "",
         "Per-vertex error at every frame, the estimator streamed one frame at a time in "
         "fp32 without the collision pass, against rigid skinning with the weights "

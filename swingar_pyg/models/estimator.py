@@ -36,6 +36,7 @@ that contains it (a stream computes it once, :class:`~swingar_pyg.inference.Swin
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import torch
 from torch import Tensor, nn
@@ -148,14 +149,19 @@ class SwinGarEstimator(nn.Module):
                 nn.init.zeros_(head.bias)
 
     @classmethod
-    def from_pretrained(cls, name_or_path: str = "base") -> "SwinGarEstimator":
+    def from_pretrained(cls, name_or_path: str | Path = "base") -> "SwinGarEstimator":
         """A trained estimator, in eval mode: the weights shipped with the package
-        by name (``"base"``, see its model card ``swingar_pyg/weights/base.json``)
+        by name (``"base"``, see its model card ``swingar_pyg/weights/base.md``)
         or a ``.pt`` file of ``swingar ship-weights``. A new garment's descriptor
         must be computed with the settings in the file's ``data`` entry
         (:func:`~swingar_pyg.training.load_pretrained` returns them; ``swingar
         predict`` uses them)."""
-        record = read_weights(name_or_path)
+        return cls.from_weights(read_weights(name_or_path))
+
+    @classmethod
+    def from_weights(cls, record: dict) -> "SwinGarEstimator":
+        """The estimator of a weights record (:func:`~swingar_pyg.models.pretrained.read_weights`),
+        in eval mode."""
         estimator = cls(**record["estimator"])
         estimator.load_state_dict(record["state_dict"])
         return estimator.eval()

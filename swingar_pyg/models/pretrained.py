@@ -56,6 +56,9 @@ def read_weights(name_or_path: str | Path = "base") -> dict:
     missing = [key for key in _KEYS if not isinstance(record, dict) or key not in record]
     if missing:
         raise ValueError(f"{path} lacks {missing}; is it a `swingar ship-weights` file?")
+    if not (isinstance(record["estimator"], dict) and isinstance(record["state_dict"], dict)
+            and isinstance(record["data"], dict)):
+        raise ValueError(f"{path}: its estimator, state_dict and data entries must be dicts")
     if record["format"] != WEIGHTS_FORMAT:
         raise ValueError(f"{path} has weights format {record['format']}; this version of "
                          f"swingar_pyg reads format {WEIGHTS_FORMAT}")

@@ -31,11 +31,12 @@ def load_estimator(checkpoint: str | Path) -> tuple[SwinGarEstimator, dict]:
     return module.estimator.eval(), saved.get("datamodule_hyper_parameters", {})
 
 
-def load_pretrained(name_or_path: str = "base") -> tuple[SwinGarEstimator, dict]:
+def load_pretrained(name_or_path: str | Path = "base") -> tuple[SwinGarEstimator, dict]:
     """A shipped estimator (by name) or a weights file (``.pt``), in eval mode, and
     the descriptor settings (``sigma``, ``seed``) it was trained with: the pair
     :func:`load_estimator` returns for a checkpoint."""
-    return SwinGarEstimator.from_pretrained(name_or_path), read_weights(name_or_path)["data"]
+    record = read_weights(name_or_path)
+    return SwinGarEstimator.from_weights(record), record["data"]
 
 
 def export_weights(checkpoint: str | Path, out: str | Path) -> dict:
