@@ -73,7 +73,7 @@ def test_report_measures_every_method_on_the_same_sequences(tiny_windows, tiny_b
     config = ReportConfig.from_yaml(report_yaml)
     report = run_report(config, progress=False, log=lambda *_: None)
     text = report.read_text()
-    for heading in ('## Error against run time', '## Per garment and per motion',
+    for heading in ('## Error against run time', '## Per garment family, garment and motion',
                     '## Streaming speed', '## Reproduce'):
         assert heading in text
     for name in ('error_vs_time.png', 'per_garment.png', 'distributions.png', 'streaming.png',
@@ -87,6 +87,12 @@ def test_report_measures_every_method_on_the_same_sequences(tiny_windows, tiny_b
                        'simulator 5x2:20'] + (
                            ['VBD simulator 2x2 (newton)'] if has_newton else [])
     by_method = {row['method']: row for row in rows}
+    # one family (the tiny data are skirts): its row is the whole split's
+    family_table = text.split('## Per garment family', 1)[1].split('![per garment]', 1)[0]
+    assert '| method | skirt mean / p95 (mm) |' in family_table
+    rigid_cell = family_table.split('| rigid skinning | ', 1)[1].split(' |', 1)[0]
+    assert float(rigid_cell.split(' / ')[0]) == pytest.approx(
+        float(by_method['rigid skinning']['mean_mm']), abs=0.051)
     # the compiled stream computes what the eager one does
     assert float(by_method['tiny estimator fp32-compiled']['mean_mm']) == pytest.approx(
         float(by_method['tiny estimator']['mean_mm']), abs=1e-3)

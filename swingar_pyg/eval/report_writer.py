@@ -15,7 +15,7 @@ import torch
 from swingar_pyg.atomic import atomic_path
 from swingar_pyg.eval.error_vs_time import setting_name, simulator_front
 from swingar_pyg.eval.stability import as_dicts, stability_summary, stability_table
-from swingar_pyg.training.vertex_errors import error_stats
+from swingar_pyg.training.vertex_errors import error_stats, garment_family
 
 
 def _write_text(path: Path, text: str) -> None:
@@ -63,6 +63,10 @@ def _garment(s) -> str:
 
 def _motion(s) -> str:
     return s.motion.name
+
+
+def _family(s) -> str:
+    return garment_family(s.garment.name)
 
 
 def plot_error_vs_time(results, rigid, simulator, second, floor, simulated):
@@ -279,7 +283,18 @@ def write_report(out: Path, config, *, machine, test_path, sequences, results, p
                      f"from the ground truth by {stats['mean_mm']:.1f} mm on average (p95 "
                      f"{stats['p95_mm']:.1f} mm): the floor two credible cloth models set "
                      f"(largest strain {100 * second.extra['max_strain']:.0f} %).")
-    lines += ["", "## Per garment and per motion", "", "![per garment](per_garment.png)", "",
+    families = sorted({_family(s) for s in sequences})
+    lines += ["", "## Per garment family, garment and motion", "",
+              "| method | " + " | ".join(f"{f} mean / p95 (mm)" for f in families) + " |",
+              "|---|" + "---|" * len(families)]
+    for label, runs in list(per_model.items()) + [("rigid skinning", [rigid])]:
+        cells = []
+        for family in families:
+            stats = [error_stats(_groups(r, sequences, _family)[family]) for r in runs]
+            cells.append(f"{np.mean([x['mean_mm'] for x in stats]):.1f} / "
+                         f"{np.mean([x['p95_mm'] for x in stats]):.1f}")
+        lines.append(f"| {label} | " + " | ".join(cells) + " |")
+    lines += ["", "![per garment](per_garment.png)", "",
               "| method | " + " | ".join(garments) + " |", "|---|" + "---|" * len(garments)]
     for label, runs in list(per_model.items()) + [("rigid skinning", [rigid])]:
         cells = []
