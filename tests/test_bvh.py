@@ -175,6 +175,24 @@ def test_retargeted_limbs_point_where_the_capture_points_them(anny_body, clip):
     assert abs(float(motion.translation[:, 2].mean())) < 0.15
 
 
+@pytest.mark.parametrize('clip', ['cmu_02_01_walk_delfem2', 'cmu_02_03_run_cgspeed_style'])
+def test_retargeted_clips_keep_the_bodys_build(anny_body, clip):
+    # The girdle bones (hip bones, clavicles) keep their rest directions: turned onto the
+    # clip's, anny's hip joints came 6 cm closer and the skin between them tore.
+    from swingar_pyg.world.body import rest_pose
+    from swingar_pyg.world.motion_library import make_motion
+
+    shape = anny_body.default_shape()
+    motion = make_motion(clip, anny_body, shape, seconds=2.0)
+    joints = anny_body.pose(shape, motion.rotations, motion.translation).joint_positions
+    rest = rest_pose(anny_body, shape).joint_positions
+    names = list(anny_body.joint_names)
+    for left, right in [('LeftUpLeg', 'RightUpLeg'), ('LeftArm', 'RightArm')]:
+        width = (joints[:, names.index(left)] - joints[:, names.index(right)]).norm(dim=-1)
+        rest_width = (rest[:, names.index(left)] - rest[:, names.index(right)]).norm(dim=-1)
+        assert torch.allclose(width, rest_width.expand_as(width), rtol=1e-3), (left, right)
+
+
 def test_make_motion_errors(anny_body):
     from swingar_pyg.world.motion_library import make_motion
 

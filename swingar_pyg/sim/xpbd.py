@@ -74,7 +74,7 @@ from swingar_pyg.sim.recording import (
 # Raise whenever a change alters simulated positions: dataset files record it, and the
 # datamodule warns when it trains on sequences an older simulator made. What each revision
 # changed: CHANGELOG.md, "Simulator revisions".
-SIMULATOR_REVISION = 8
+SIMULATOR_REVISION = 9
 
 
 @dataclass(frozen=True)
