@@ -15,7 +15,8 @@ largest strain, the mean substeps a frame and the time a frame. One run's larges
 chaotic (``bench_strain.py`` repeats runs); the share of frames above the bar is the steadier
 figure, and the one a dataset config is chosen by.
 
-Writes ``benchmarks/results/bench_truth.json`` and a heat map ``bench_truth.png``.
+Writes ``benchmarks/results/bench_truth.json`` and a heat map ``bench_truth.png`` (``--name``
+for another name, when ``--garments`` or ``--motions`` pick a subset).
 """
 
 from __future__ import annotations
@@ -44,6 +45,8 @@ GARMENTS = {
     "dress": {"kind": "dress", "length": 0.95, "flare": 0.25, "vertices": 1500},
     "t-shirt (sewn)": {"kind": "tshirt", "length": 0.75, "sleeve": 0.4, "vertices": 1500},
     "jumpsuit (sewn)": {"kind": "jumpsuit", "leg": 1.0, "vertices": 2000},
+    "jumpsuit (sewn), loose": {"kind": "jumpsuit", "leg": 1.0, "vertices": 2000, "ease": 0.08,
+                               "flare": 0.1, "clearance": 0.05, "crotch_drop": 0.2},
     "MakeHuman tshirt_loose": {"kind": "shipped", "name": "tshirt_loose"},
     "MakeHuman top_short_sleeve": {"kind": "shipped", "name": "top_short_sleeve"},
     "MakeHuman dress_skirt_knee": {"kind": "shipped", "name": "dress_skirt_knee"},
@@ -98,6 +101,8 @@ def main() -> None:
     parser.add_argument("--garments", nargs="+", choices=list(GARMENTS), default=list(GARMENTS))
     parser.add_argument("--motions", nargs="+", choices=list(MOTIONS), default=list(MOTIONS))
     parser.add_argument("--seconds", type=float, default=3.0)
+    parser.add_argument("--name", default="bench_truth",
+                        help="results/<name>.json and .png (a subset of rows under its own name)")
     parser.add_argument("--quick", action="store_true",
                         help="a skirt and the sewn t-shirt on sway and the walk clip, 1 s")
     args = parser.parse_args()
@@ -136,8 +141,7 @@ def main() -> None:
                   f"{r['ms_per_frame']:.0f} ms/frame", flush=True)
     payload = {"machine": machine_info(), "simulator_revision": SIMULATOR_REVISION,
                "seconds": args.seconds, "settings": SETTINGS, "rows": rows}
-    name = "bench_truth" + ("_quick" if args.quick else "")
-    path = write_results(name, payload, plot(rows))
+    path = write_results(args.name + ("_quick" if args.quick else ""), payload, plot(rows))
     print(f"wrote {path} and its .png")
 
 

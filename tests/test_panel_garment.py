@@ -108,11 +108,34 @@ def test_a_sewn_tshirt_swings_on_a_walk_without_tearing(anny):
     assert np.nanmax(result.penetration) < 0.01
 
 
+def test_the_jumpsuits_inseams_meet_crotch_drop_below_the_hip_joints(anny):
+    body, shape = anny
+    joints = body.pose(shape, torch.eye(3).expand(1, len(body.joint_names), 3, 3),
+                       torch.zeros(1, 3)).joint_positions[0]
+    hip_z = float(joints[body.joint_names.index('LeftUpLeg'), 2])
+    crotch = {}
+    for drop in (0.09, 0.2):
+        mesh = fit_garment(JumpsuitSpec(vertices=800, crotch_drop=drop), body, shape).mesh
+        v, f = mesh.vertices, mesh.faces
+        # the crotch: the lowest vertex joined to both the left and the right half
+        edges = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+        edges = np.concatenate([edges, edges[:, ::-1]])
+        left = np.zeros(len(v), bool)
+        right = np.zeros(len(v), bool)
+        np.logical_or.at(left, edges[:, 0], v[edges[:, 1], 0] > 0.005)
+        np.logical_or.at(right, edges[:, 0], v[edges[:, 1], 0] < -0.005)
+        crotch[drop] = v[left & right, 2].min()
+        # the seam is lifted off the body but keeps its height (to the triangles' size)
+        assert abs(crotch[drop] - (hip_z - drop)) < 0.025, (drop, crotch[drop], hip_z)
+    assert crotch[0.09] - crotch[0.2] > 0.09
+
+
 @pytest.mark.parametrize('kind, kwargs, message', [
     ('tshirt', {'length': 2.0}, 'TShirtSpec.length must be in'),
     ('tshirt', {'vertices': 50}, 'at least 200 vertices'),
     ('jumpsuit', {'leg': 0.1}, 'JumpsuitSpec.leg must be in'),
     ('jumpsuit', {'clearance': 0.0}, 'clearance must be in'),
+    ('jumpsuit', {'crotch_drop': 0.5}, 'JumpsuitSpec.crotch_drop must be in'),
     ('poncho', {}, "unknown garment kind 'poncho'")])
 def test_bad_sewn_garment_specs_are_refused(kind, kwargs, message):
     with pytest.raises(ValueError, match=message):

@@ -100,19 +100,24 @@ class JumpsuitSpec:
     Attributes:
         leg: leg length as a share of hip-to-ankle (0.3 shorts ... 1 full length).
         ease, flare: room at the side seams and extra width at the leg ends, metres.
+        crotch_drop: how far below the hip joints the inseams meet, metres. anny's
+            crotch is 9-11 cm below them; a deeper crotch leaves the cloth between the
+            legs room to follow a stride (``benchmarks/bench_fit.py`` measures it).
         vertices, jitter, clearance, seed: as for :class:`TShirtSpec`.
     """
 
     leg: float = 0.9
     ease: float = 0.04
     flare: float = 0.05
+    crotch_drop: float = 0.09
     vertices: int = 2000
     jitter: float = 0.0
     clearance: float = 0.01
     seed: int = 0
 
     def __post_init__(self):
-        _check(self, leg=(0.3, 1.0), ease=(0.0, 0.2), flare=(0.0, 0.3))
+        _check(self, leg=(0.3, 1.0), ease=(0.0, 0.2), flare=(0.0, 0.3),
+               crotch_drop=(0.05, 0.25))
 
     @property
     def name(self) -> str:
@@ -166,7 +171,7 @@ def jumpsuit_pattern(spec: JumpsuitSpec, joints: dict[str, np.ndarray],
     """The jumpsuit's outline from the rest joints (x, z) and the body's widths."""
     hip, knee, ankle = joints["LeftUpLeg"], joints["LeftLeg"], joints["LeftFoot"]
     chest = joints["Spine1"][1] - 0.02
-    crotch = hip[1] - 0.09
+    crotch = hip[1] - spec.crotch_drop
     end_z = hip[1] + spec.leg * (ankle[1] + 0.06 - hip[1])
     centre_x = np.interp(end_z, [ankle[1], knee[1], hip[1]], [ankle[0], knee[0], hip[0]])
     half_leg = np.interp(end_z, [ankle[1], hip[1]], [0.06, 0.10]) + spec.ease + spec.flare
