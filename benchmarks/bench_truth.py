@@ -1,7 +1,7 @@
 """How good the simulated truth is, by garment family and motion: the share of frames whose
 largest edge strain ends above the 6 % stretch bar.
 
-    OMP_NUM_THREADS=1 python benchmarks/bench_truth.py            # ~35 minutes on one core
+    OMP_NUM_THREADS=1 python benchmarks/bench_truth.py            # ~50 minutes on one core
     OMP_NUM_THREADS=1 python benchmarks/bench_truth.py --quick    # two garments, two motions
 
 Each garment of ``GARMENTS`` (one or two of every family the world makes: procedural skirts
