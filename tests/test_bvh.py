@@ -178,7 +178,7 @@ def test_retargeted_limbs_point_where_the_capture_points_them(anny_body, clip):
 @pytest.mark.parametrize('clip', ['cmu_02_01_walk_delfem2', 'cmu_02_03_run_cgspeed_style'])
 def test_retargeted_clips_keep_the_bodys_build(anny_body, clip):
     # The girdle bones (hip bones, clavicles) keep their rest directions: turned onto the
-    # clip's, anny's hip joints came 6 cm closer and the skin between them tore.
+    # clip's, anny's hip joints would come 6 cm closer and tear the skin between them.
     from swingar_pyg.world.body import rest_pose
     from swingar_pyg.world.motion_library import make_motion
 

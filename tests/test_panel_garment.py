@@ -128,6 +128,8 @@ def test_the_jumpsuits_inseams_meet_crotch_drop_below_the_hip_joints(anny):
         # the seam is lifted off the body but keeps its height (to the triangles' size)
         assert abs(crotch[drop] - (hip_z - drop)) < 0.025, (drop, crotch[drop], hip_z)
     assert crotch[0.09] - crotch[0.2] > 0.09
+    with pytest.raises(ValueError, match='crotch_drop 0.25 m leaves no leg'):
+        fit_garment(JumpsuitSpec(vertices=800, leg=0.3, crotch_drop=0.25), body, shape)
 
 
 @pytest.mark.parametrize('kind, kwargs, message', [

@@ -120,6 +120,13 @@ def test_a_cmu_clip_retargets_onto_smpl(smpl):
     knee = motion.rotations[:, SMPL_JOINTS.index('left_knee')]
     angle = torch.arccos(((knee.diagonal(dim1=-2, dim2=-1).sum(-1) - 1) / 2).clamp(-1, 1))
     assert math.degrees(float(angle.max() - angle.min())) > 20  # the knee bends in the walk
+    # the collars (CMU's LeftShoulder, a clavicle) keep SMPL's build: the shoulders stay as
+    # far apart as at rest
+    rest = smpl.pose(torch.zeros(10), torch.eye(3).expand(1, 24, 3, 3), torch.zeros(1, 3))
+    left, right = SMPL_JOINTS.index('left_shoulder'), SMPL_JOINTS.index('right_shoulder')
+    width = (posed.joint_positions[:, left] - posed.joint_positions[:, right]).norm(dim=-1)
+    rest_width = (rest.joint_positions[0, left] - rest.joint_positions[0, right]).norm()
+    assert torch.allclose(width, rest_width.expand_as(width), rtol=1e-3)
 
 
 def test_bad_input_is_refused(smpl, tmp_path):

@@ -173,6 +173,10 @@ def jumpsuit_pattern(spec: JumpsuitSpec, joints: dict[str, np.ndarray],
     chest = joints["Spine1"][1] - 0.02
     crotch = hip[1] - spec.crotch_drop
     end_z = hip[1] + spec.leg * (ankle[1] + 0.06 - hip[1])
+    if crotch < end_z + 0.05:
+        raise ValueError(f"crotch_drop {spec.crotch_drop} m leaves no leg: the legs end "
+                         f"{hip[1] - end_z:.2f} m below the hip joints (lengthen the legs or "
+                         f"raise the crotch)")
     centre_x = np.interp(end_z, [ankle[1], knee[1], hip[1]], [ankle[0], knee[0], hip[0]])
     half_leg = np.interp(end_z, [ankle[1], hip[1]], [0.06, 0.10]) + spec.ease + spec.flare
     left = [(0.0, chest), (chest_half_width + spec.ease, chest),

