@@ -108,6 +108,13 @@ def test_a_sewn_tshirt_swings_on_a_walk_without_tearing(anny):
     assert np.nanmax(result.penetration) < 0.01
 
 
+def test_jumpsuits_of_different_cuts_have_different_names():
+    assert JumpsuitSpec(leg=1.0, vertices=800).name == 'jumpsuit-g1.00-n800-grid'
+    loose = JumpsuitSpec(leg=1.0, vertices=800, clearance=0.05, crotch_drop=0.2)
+    assert loose.name == 'jumpsuit-g1.00-n800-grid-e0.04-f0.05-c0.05-d0.20'
+    assert loose.name != JumpsuitSpec(leg=1.0, vertices=800, clearance=0.05).name
+
+
 def test_the_jumpsuits_inseams_meet_crotch_drop_below_the_hip_joints(anny):
     body, shape = anny
     joints = body.pose(shape, torch.eye(3).expand(1, len(body.joint_names), 3, 3),
