@@ -41,6 +41,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_truth import MOTIONS, SETTINGS  # noqa: E402
 from common import machine_info, write_results  # noqa: E402
 
+from swingar_pyg.geometry.mesh import mesh_edges  # noqa: E402
 from swingar_pyg.geometry.skinning import linear_blend_skinning  # noqa: E402
 from swingar_pyg.sim import (  # noqa: E402
     SIMULATOR_REVISION,
@@ -51,6 +52,7 @@ from swingar_pyg.sim import (  # noqa: E402
     XPBDCloth,
     XPBDSettings,
 )
+from swingar_pyg.sim.recording import signed_edge_strain  # noqa: E402
 from swingar_pyg.world.body import AnnyBody  # noqa: E402
 from swingar_pyg.world.catalogue import fit_garment, garment_spec  # noqa: E402
 from swingar_pyg.world.garment import Garment  # noqa: E402
@@ -87,18 +89,11 @@ def thigh_turn(body: AnnyBody, degrees: float) -> Motion:
 
 def hip_edges(body: AnnyBody) -> np.ndarray:
     """``(E, 2)`` body edges whose two vertices follow a joint of ``HIP_JOINTS`` most."""
-    faces = body.faces.numpy()
-    edges = np.unique(np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1), axis=0)
+    edges = mesh_edges(body.faces.numpy())
     indices, weights = body.skinning()
     main_joint = indices.numpy()[np.arange(len(indices)), weights.numpy().argmax(1)]
     at_hips = np.isin(main_joint, [body.joint_names.index(j) for j in HIP_JOINTS])
     return edges[at_hips[edges].all(axis=1)]
-
-
-def largest_strain(vertices: np.ndarray, rest: np.ndarray, edges: np.ndarray) -> float:
-    lengths = np.linalg.norm(vertices[edges[:, 0]] - vertices[edges[:, 1]], axis=-1)
-    rest_lengths = np.linalg.norm(rest[edges[:, 0]] - rest[edges[:, 1]], axis=-1)
-    return float(np.abs(lengths / rest_lengths - 1.0).max())
 
 
 def held_pose(body: AnnyBody, shape: torch.Tensor, garment: Garment, degrees: float,
@@ -120,12 +115,15 @@ def held_pose(body: AnnyBody, shape: torch.Tensor, garment: Garment, degrees: fl
     collider = BodyCollider(posed.vertices, body.faces, thickness=xpbd.thickness)
     with_body = XPBDCloth(garment.mesh, garment.pinned, xpbd).simulate(rigid[0], pins, collider)
     alone = XPBDCloth(garment.mesh, garment.pinned, xpbd).simulate(rigid[0], pins, None)
-    body_vertices = posed.vertices.numpy()
+    skin_edges = torch.as_tensor(skin_edges)
+    rest_lengths = (posed.vertices[0, skin_edges[:, 0]] - posed.vertices[0, skin_edges[:, 1]]
+                    ).norm(dim=-1)
+    skin_strain = signed_edge_strain(posed.vertices[-1], skin_edges, rest_lengths).abs().max()
     row = {"degrees": degrees, "knee_forward_m": forward,
            "xpbd_strain": float(with_body.max_stretch[-1]),
            "xpbd_inside": float(with_body.penetration[-1]),
            "xpbd_without_body_strain": float(alone.max_stretch[-1]),
-           "hip_skin_strain": largest_strain(body_vertices[-1], body_vertices[0], skin_edges)}
+           "hip_skin_strain": float(skin_strain)}
     if vbd:
         settings = VBDSettings(fps=FPS)
         result = VBDCloth(garment.mesh, garment.pinned, settings).simulate(

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 import torch
 
-from swingar_pyg.geometry.mesh import boundary_edges
+from swingar_pyg.geometry.mesh import boundary_edges, mesh_edges
 from swingar_pyg.world.catalogue import fit_garment, garment_spec
 from swingar_pyg.world.panel_garment import (
     JumpsuitSpec,
@@ -125,7 +125,7 @@ def test_the_jumpsuits_inseams_meet_crotch_drop_below_the_hip_joints(anny):
         mesh = fit_garment(JumpsuitSpec(vertices=800, crotch_drop=drop), body, shape).mesh
         v, f = mesh.vertices, mesh.faces
         # the crotch: the lowest vertex joined to both the left and the right half
-        edges = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+        edges = mesh_edges(f)
         edges = np.concatenate([edges, edges[:, ::-1]])
         left = np.zeros(len(v), bool)
         right = np.zeros(len(v), bool)
