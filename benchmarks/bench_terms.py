@@ -15,23 +15,21 @@ body (each row also carries the baseline's figures, to compare). A term that hel
 training families but hurts a family shows as a variant that beats the full model there.
 
     python benchmarks/bench_terms.py --weights base --data configs/data/base.yaml \\
-        --extra "overall=configs/data/jumpsuit.yaml" --stride 4
+        --extra-test "overall=configs/data/jumpsuit.yaml" --stride 4
 """
 
 from __future__ import annotations
 
 import argparse
 import copy
-from pathlib import Path
 
 import torch
 from common import machine_info, write_results
 
 from swingar_pyg.eval.error_vs_time import load_test_sequences
-from swingar_pyg.eval.model_card import measure
+from swingar_pyg.eval.model_card import labelled_configs, made_test_split, measure
 from swingar_pyg.training import load_pretrained
 from swingar_pyg.world.body import AnnyBody
-from swingar_pyg.world.dataset import DatasetConfig
 
 # variant -> the heads whose last layer is zeroed
 VARIANTS = {
@@ -60,10 +58,7 @@ def split_sequences(config_path: str, body, stride: int) -> list:
     ``make-dataset``), in the order of their ids."""
     import h5py
 
-    config = DatasetConfig.from_yaml(config_path)
-    path = Path(config.output) / "test.h5"
-    if not path.exists():
-        raise ValueError(f"{path} does not exist: run swingar make-dataset -c {config_path}")
+    _, path = made_test_split(config_path)
     with h5py.File(path, "r") as file:
         ids = sorted(file["sequences"])[::stride]
     return load_test_sequences(path, body, ids=ids)
@@ -73,7 +68,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--weights", default="base", help="a shipped name or a .pt file")
     parser.add_argument("--data", default="configs/data/base.yaml")
-    parser.add_argument("--extra", action="append", default=[], metavar="LABEL=CONFIG",
+    parser.add_argument("--extra-test", action="append", default=[], metavar="LABEL=CONFIG",
                         help="another dataset config whose test split is measured")
     parser.add_argument("--stride", type=int, default=1,
                         help="every k-th sequence of each split (default: all)")
@@ -81,12 +76,7 @@ def main() -> None:
     args = parser.parse_args()
     if args.stride < 1:
         raise ValueError(f"--stride must be >= 1, got {args.stride}")
-    splits = {"test": args.data}
-    for item in args.extra:
-        label, sep, config = item.partition("=")
-        if not sep or not label or not config:
-            raise ValueError(f"--extra takes LABEL=CONFIG, got {item!r}")
-        splits[label] = config
+    splits = {"test": args.data, **labelled_configs(args.extra_test, "--extra-test")}
 
     estimator, data_settings = load_pretrained(args.weights)
     body = AnnyBody()

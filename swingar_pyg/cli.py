@@ -354,15 +354,10 @@ def _predict(args: argparse.Namespace) -> int:
 
 
 def _ship_weights(args: argparse.Namespace) -> int:
-    from swingar_pyg.eval.model_card import ship_weights
+    from swingar_pyg.eval.model_card import labelled_configs, ship_weights
     from swingar_pyg.models.pretrained import WEIGHTS_DIR
 
-    extra = {}
-    for item in args.extra_test:
-        label, sep, config = item.partition("=")
-        if not sep or not label or not config:
-            raise ValueError(f"--extra-test takes LABEL=CONFIG, got {item!r}")
-        extra[label] = config
+    extra = labelled_configs(args.extra_test, "--extra-test")
     card = ship_weights(args.ckpt, args.name, args.data, extra, args.training_command,
                         args.out_dir or WEIGHTS_DIR)
     print(card.with_suffix(".md").read_text())

@@ -115,7 +115,20 @@ def check_weights_name(name: str) -> str:
     return name
 
 
-def _test_split(config_path: str | Path) -> tuple[DatasetConfig, Path]:
+def labelled_configs(items: list[str], option: str) -> dict[str, str]:
+    """``{label: dataset config}`` of command-line ``LABEL=CONFIG`` items given to ``option``."""
+    configs = {}
+    for item in items:
+        label, sep, config = item.partition("=")
+        if not sep or not label or not config:
+            raise ValueError(f"{option} takes LABEL=CONFIG, got {item!r}")
+        configs[label] = config
+    return configs
+
+
+def made_test_split(config_path: str | Path) -> tuple[DatasetConfig, Path]:
+    """A dataset config and its test split file; raises ``ValueError`` if either is
+    missing (this never starts a simulation)."""
     if not Path(config_path).is_file():
         raise ValueError(f"no dataset config at {config_path}")
     config = DatasetConfig.from_yaml(config_path)
@@ -142,8 +155,8 @@ def ship_weights(checkpoint: str | Path, name: str, dataset: str | Path,
     check_weights_name(name)
     out_dir = Path(out_dir)
     body = AnnyBody()
-    config, test_path = _test_split(dataset)
-    extra_paths = {label: _test_split(path)[1]
+    config, test_path = made_test_split(dataset)
+    extra_paths = {label: made_test_split(path)[1]
                    for label, path in (extra_tests or {}).items()}
     out_dir.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(dir=out_dir, prefix=f".{name}-") as staging:

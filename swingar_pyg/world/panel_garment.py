@@ -122,9 +122,9 @@ class JumpsuitSpec:
     @property
     def name(self) -> str:
         """Leg length, vertices and topology; the cut too where it is not the default."""
-        cut = (self.ease, self.flare, self.clearance, self.crotch_drop)
-        default = tuple(getattr(JumpsuitSpec, f) for f in ("ease", "flare", "clearance",
-                                                           "crotch_drop"))
+        fields = ("ease", "flare", "clearance", "crotch_drop")
+        cut = tuple(getattr(self, f) for f in fields)
+        default = tuple(getattr(JumpsuitSpec, f) for f in fields)
         suffix = "" if cut == default else "-e{:.2f}-f{:.2f}-c{:.2f}-d{:.2f}".format(*cut)
         return f"jumpsuit-g{self.leg:.2f}-n{self.vertices}-{topology_tag(self.jitter)}{suffix}"
 
