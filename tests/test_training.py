@@ -37,6 +37,25 @@ def test_overfits_one_short_sequence(tiny_windows):
     assert min(losses[-10:]) < losses[0] / 5, (losses[0], losses[-10:])
 
 
+def test_offset_losses_are_the_mean_squared_blend_shapes_and_correction(tiny_windows):
+    from swingar_pyg.training import SwinGarModule
+
+    dataset = tiny_windows.datasets['train']
+    batch = Batch.from_data_list([dataset[0], dataset[len(dataset) - 1]])
+    estimator = SwinGarEstimator(**SMALL_ESTIMATOR)
+    blend, correction = torch.tensor([0.01, -0.02, 0.03]), torch.tensor([0.05, 0.0, -0.01])
+    with torch.no_grad():  # constant offsets: the correction turns with the body, same length
+        estimator.blend_head.bias.copy_(blend)
+        estimator.correction.bias.copy_(correction)
+    module = SwinGarModule(estimator, blend_weight=0.5, correction_weight=0.5,
+                           collision_weight=0.0)
+    terms = module._losses(batch, module(batch))
+    torch.testing.assert_close(terms['blend'], blend.square().sum())
+    torch.testing.assert_close(terms['correction'], correction.square().sum())
+    plain = SwinGarModule(estimator, collision_weight=0.0)
+    assert not {'blend', 'correction'} & set(plain._losses(batch, plain(batch)))
+
+
 def _small_fit_args(tiny_windows, root) -> list[str]:
     return ['-c', 'configs/quickstart.yaml', '--data.config', tiny_windows.hparams.config,
             '--data.generation_workers', '1', '--data.batch_size', '2',

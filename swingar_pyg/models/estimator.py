@@ -53,10 +53,12 @@ _PRIOR_FLOOR = 1e-6
 @dataclass
 class EstimatorOutput:
     """Predictions at the three target frames: ``vertices`` :math:`\\mathbf{M}`
-    and ``skinned`` :math:`\\mathbf{M}_c`, both ``(3, N, 3)`` in world space."""
+    and ``skinned`` :math:`\\mathbf{M}_c`, both ``(3, N, 3)`` in world space, and
+    the blend shapes :math:`\\mathbf{B}` ``(3, N, 3)`` in the rest frame."""
 
     vertices: Tensor
     skinned: Tensor
+    blend: Tensor
 
 
 def _mlp(in_channels: int, channels: int) -> nn.Sequential:
@@ -201,18 +203,24 @@ class SwinGarEstimator(nn.Module):
         shape = body_shape.unsqueeze(1).expand(-1, current.size(1), -1)
         return self.body_parser(torch.cat([shape, current], dim=-1))
 
-    def skin(self, data, edge_index: Tensor, garment_features: Tensor, shape_code: Tensor,
-             motion_code: Tensor, transforms: Tensor) -> Tensor:
-        r""":math:`\mathbf{M}_c` at one frame, given that frame's motion code
-        ``(G, C)`` and skinning transforms ``(G, J, 4, 4)``: ``(N, 3)``."""
-        batch = batch_vector(data)
-        state = self.state_encoder(garment_features * motion_code[batch], edge_index)
+    def skinning_terms(self, data, edge_index: Tensor, garment_features: Tensor,
+                       shape_code: Tensor, motion_code: Tensor) -> tuple[Tensor, Tensor]:
+        r"""The skinning weights :math:`\mathbf{W}` ``(N, J)`` and blend shapes
+        :math:`\mathbf{B}` ``(N, 3)`` of one frame, given its motion code ``(G, C)``."""
+        state = self.state_encoder(garment_features * motion_code[batch_vector(data)], edge_index)
         hidden = self.predictor(state * shape_code, edge_index)
         logits = self.skinning_head(hidden)
         if self.skinning_prior:
             logits = logits + torch.log(data.prior_weights.clamp_min(_PRIOR_FLOOR))
-        weights = torch.softmax(logits, dim=-1)
-        return skin_points(data.rest + self.blend_head(hidden), weights, transforms, batch)
+        return torch.softmax(logits, dim=-1), self.blend_head(hidden)
+
+    def skin(self, data, edge_index: Tensor, garment_features: Tensor, shape_code: Tensor,
+             motion_code: Tensor, transforms: Tensor) -> Tensor:
+        r""":math:`\mathbf{M}_c` at one frame, given that frame's motion code
+        ``(G, C)`` and skinning transforms ``(G, J, 4, 4)``: ``(N, 3)``."""
+        weights, blend = self.skinning_terms(data, edge_index, garment_features, shape_code,
+                                             motion_code)
+        return skin_points(data.rest + blend, weights, transforms, batch_vector(data))
 
     def detail_inputs(self, skinned: Tensor, joint_positions: Tensor, frame_rotation: Tensor,
                       frame_origin: Tensor, batch: Tensor) -> Tensor:
@@ -252,16 +260,19 @@ class SwinGarEstimator(nn.Module):
         _check_window(data, self.num_joints, self.history)
         edge_index, features, shape_code = self.encode_garment(data)
         motion = self.motion_codes(data.pose_history, data.history_mask)
+        batch = batch_vector(data)
+        terms = [self.skinning_terms(data, edge_index, features, shape_code, motion[:, k])
+                 for k in range(TARGET_FRAMES)]
+        blend = torch.stack([offsets for _, offsets in terms])
         skinned = torch.stack([
-            self.skin(data, edge_index, features, shape_code, motion[:, k],
-                      data.joint_transforms[:, k])
-            for k in range(TARGET_FRAMES)])
+            skin_points(data.rest + blend[k], weights, data.joint_transforms[:, k], batch)
+            for k, (weights, _) in enumerate(terms)])
         if self.detail is None:
-            return EstimatorOutput(skinned, skinned)
+            return EstimatorOutput(skinned, skinned, blend)
         codes = self.body_codes(data.body_shape, data.pose_history)
-        vertices = self.refine(edge_index, batch_vector(data), skinned, data.joint_positions, codes,
+        vertices = self.refine(edge_index, batch, skinned, data.joint_positions, codes,
                                data.frame_rotation, data.frame_origin)
-        return EstimatorOutput(vertices, skinned)
+        return EstimatorOutput(vertices, skinned, blend)
 
 
 def batch_vector(data) -> Tensor:

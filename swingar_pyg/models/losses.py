@@ -12,6 +12,9 @@ Batch of garments; positions in metres.
 - collision (PBNS): :math:`\frac{1}{FN}\sum \max(0,\ \epsilon - (\mathbf{x} - \mathbf{b})
   \cdot \mathbf{n}_b)^2` with :math:`\mathbf{b}, \mathbf{n}_b` the nearest posed body sample
   and its normal
+- offset: :math:`\frac{1}{FN}\sum \lVert \mathbf{d} \rVert^2` of a learned displacement
+  (blend shapes, detail correction): it keeps two terms from growing large in opposite
+  directions, a pair that cancels on the training garments but not on new ones
 """
 
 from __future__ import annotations
@@ -45,6 +48,10 @@ def uniform_laplacian(x: Tensor, edge_index: Tensor) -> Tensor:
 def bending_loss(pred: Tensor, target: Tensor, edge_index: Tensor) -> Tensor:
     return (uniform_laplacian(pred, edge_index) -
             uniform_laplacian(target, edge_index)).square().sum(-1).mean()
+
+
+def offset_loss(offsets: Tensor) -> Tensor:
+    return offsets.square().sum(-1).mean()
 
 
 def velocity_loss(pred: Tensor, target: Tensor) -> Tensor:

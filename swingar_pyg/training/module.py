@@ -29,6 +29,9 @@ class SwinGarModule(L.LightningModule):
             :math:`\mathbf{M}_c` before the detail correction (deep supervision;
             off by default: on quickstart it made validation worse, 16.7 against
             14.6 mm).
+        blend_weight, correction_weight: weights of an offset loss on the blend
+            shapes :math:`\mathbf{B}` and on the detail correction
+            :math:`\mathbf{M} - \mathbf{M}_c` (0 skips it).
         collision_margin: distance (m) the collision loss keeps from the body.
         lr: Adam learning rate, annealed by a cosine over the run.
         weight_decay: AdamW weight decay.
@@ -38,7 +41,8 @@ class SwinGarModule(L.LightningModule):
     def __init__(self, estimator: SwinGarEstimator, vertex_weight: float = 1.0,
                  edge_weight: float = 1.0, bending_weight: float = 1.0,
                  velocity_weight: float = 1.0, collision_weight: float = 0.1,
-                 skinned_weight: float = 0.0,
+                 skinned_weight: float = 0.0, blend_weight: float = 0.0,
+                 correction_weight: float = 0.0,
                  collision_margin: float = 0.004, lr: float = 1e-3,
                  weight_decay: float = 0.0, compile: bool = False):
         super().__init__()
@@ -47,7 +51,8 @@ class SwinGarModule(L.LightningModule):
         self._network = torch.compile(estimator) if compile else estimator
         self.weights = {"vertex": vertex_weight, "edge": edge_weight,
                         "bending": bending_weight, "velocity": velocity_weight,
-                        "collision": collision_weight, "skinned": skinned_weight}
+                        "collision": collision_weight, "skinned": skinned_weight,
+                        "blend": blend_weight, "correction": correction_weight}
         self.errors = VertexErrors()
         self.last_summary: dict = {}
 
@@ -60,6 +65,10 @@ class SwinGarModule(L.LightningModule):
         terms = {}
         if self.weights["skinned"]:
             terms["skinned"] = losses.vertex_loss(output.skinned, target)
+        if self.weights["blend"]:
+            terms["blend"] = losses.offset_loss(output.blend)
+        if self.weights["correction"]:
+            terms["correction"] = losses.offset_loss(prediction - output.skinned)
         if self.weights["vertex"]:
             terms["vertex"] = losses.vertex_loss(prediction, target)
         if self.weights["edge"]:
