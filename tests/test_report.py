@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 import torch
 
+from swingar_pyg.models import SwinGarEstimator
 from tests.extras import in_ci, require
 from tests.windows import SMALL_ESTIMATOR, SMALL_FEATURES
 
@@ -165,7 +166,8 @@ def test_report_configs_parse_and_bad_ones_are_refused(tmp_path):
     for name in ('quickstart', 'ablations', 'base', 'ablations_base'):
         config = ReportConfig.from_yaml(f'configs/report/{name}.yaml')
         assert config.models and config.output.startswith('runs/report/')
-        folders = [_run_folder(m.configs, seed)[0] for m in config.models for seed in m.seeds]
+        folders = [_run_folder(m.configs, seed)[0] for m in config.models for seed in m.seeds
+                   if m.weights is None]
         assert len(set(folders)) == len(folders), name  # no two runs share a folder
         assert all(Path(c).is_file() for m in config.models for c in m.configs)
     ablations = ReportConfig.from_yaml('configs/report/ablations.yaml')
@@ -175,7 +177,22 @@ def test_report_configs_parse_and_bad_ones_are_refused(tmp_path):
     assert [m.configs for m in one_seed.models] == [m.configs for m in ablations.models]
     with pytest.raises(ValueError, match='seeds must be non-negative'):
         ablations.with_seeds(())
+    # a weights entry is measured as shipped: the same network as from_pretrained
+    shipped = ReportConfig.from_yaml('configs/report/base.yaml').models[0]
+    estimator, data, source = shipped.load(seed=0, train_missing=False)
+    reference = SwinGarEstimator.from_pretrained(shipped.weights)
+    assert source == f'weights {shipped.weights}' and set(data) == {'sigma', 'seed'}
+    for name, value in reference.state_dict().items():
+        assert torch.equal(estimator.state_dict()[name], value), name
     bad = tmp_path / 'bad.yaml'
+    bad.write_text('name: x\noutput: y\ndataset: z\nmodels: [{name: m, configs: [c], '
+                   'weights: base}]\n')
+    with pytest.raises(ValueError, match='either configs .* or weights'):
+        ReportConfig.from_yaml(bad)
+    bad.write_text('name: x\noutput: y\ndataset: z\nmodels: [{name: m, weights: base, '
+                   'seeds: [0, 1]}]\n')
+    with pytest.raises(ValueError, match='is a weights file: it has no seeds'):
+        ReportConfig.from_yaml(bad)
     bad.write_text('name: x\noutput: y\ndataset: z\nmodels: [{name: m, configs: [c], '
                    'collisions: [neural]}]\n')
     with pytest.raises(ValueError, match='names no body_sdf'):

@@ -4,8 +4,9 @@ folder (Markdown, CSV, PNG, JSON).
 
 The config names a test split (through its dataset config, generated if missing;
 ``extra_tests`` adds other test splits, e.g. a garment type never trained on, evaluated on
-the first model), the trained models (each a stack of training configs and seeds; a
-missing checkpoint is trained first when ``train_missing``), the precisions and collision
+the first model), the trained models (each a stack of training configs and seeds, a
+missing checkpoint trained first when ``train_missing``; or a weights file, e.g. the
+shipped ``base``), the precisions and collision
 passes to evaluate them with, the simulator settings to place against them, the garment
 sizes to stream, and the stability suite's size. See ``configs/report/quickstart.yaml``.
 """
@@ -35,7 +36,8 @@ from swingar_pyg.eval.report_writer import write_report
 from swingar_pyg.eval.stability import FULL, SMALL, run_stability
 from swingar_pyg.eval.stream_speed import stream_speed
 from swingar_pyg.geometry.spectral import DESCRIPTOR_SIGMA
-from swingar_pyg.training import load_body_sdf, load_estimator
+from swingar_pyg.models import SwinGarEstimator
+from swingar_pyg.training import load_body_sdf, load_estimator, load_pretrained
 from swingar_pyg.training.cli import build_cli
 from swingar_pyg.world.body import AnnyBody
 from swingar_pyg.world.dataset import DatasetConfig, make_dataset
@@ -43,13 +45,36 @@ from swingar_pyg.world.dataset import DatasetConfig, make_dataset
 
 @dataclass(frozen=True)
 class ModelSpec:
-    """A trained estimator: its training configs (layered), seeds, and the
-    collision passes to evaluate it with (``none``, ``exact``, ``neural``)."""
+    """A trained estimator: its training configs (layered) and seeds, or instead
+    ``weights`` (a shipped name or a ``.pt`` file of ``swingar ship-weights``,
+    measured as is), and the collision passes to evaluate it with (``none``,
+    ``exact``, ``neural``)."""
 
     name: str
     configs: tuple[str, ...]
     seeds: tuple[int, ...] = (0,)
     collisions: tuple[str, ...] = ("none",)
+    weights: str | None = None
+
+    @classmethod
+    def from_entry(cls, entry: dict) -> "ModelSpec":
+        """A ``models:`` entry of a report config."""
+        if ("configs" in entry) == ("weights" in entry):
+            raise ValueError(f"model {entry.get('name')!r} needs either configs (to train) "
+                             "or weights (a shipped name or .pt file), not both")
+        if "weights" in entry and entry.get("seeds", [0]) != [0]:
+            raise ValueError(f"model {entry['name']!r} is a weights file: it has no seeds")
+        return cls(entry["name"], tuple(entry.get("configs", ())),
+                   tuple(entry.get("seeds", (0,))), tuple(entry.get("collisions", ("none",))),
+                   entry.get("weights"))
+
+    def load(self, seed: int, train_missing: bool) -> tuple[SwinGarEstimator, dict, str]:
+        """The estimator of ``seed`` in eval mode, its descriptor settings, and where
+        it came from (a checkpoint, trained first if missing, or the weights)."""
+        if self.weights is not None:
+            return *load_pretrained(self.weights), f"weights {self.weights}"
+        checkpoint = ensure_checkpoint(self.configs, seed, train_missing)
+        return *load_estimator(checkpoint), checkpoint
 
 
 @dataclass(frozen=True)
@@ -79,10 +104,7 @@ class ReportConfig:
 
         raw = yaml.safe_load(Path(path).read_text())
         try:
-            models = tuple(ModelSpec(m["name"], tuple(m["configs"]),
-                                     tuple(m.get("seeds", (0,))),
-                                     tuple(m.get("collisions", ("none",))))
-                           for m in raw["models"])
+            models = tuple(ModelSpec.from_entry(m) for m in raw["models"])
             simulator = raw.get("simulator", {})
             streaming = raw.get("streaming", {})
             config = cls(
@@ -130,7 +152,8 @@ class ReportConfig:
         --seeds 0`` trains and measures one seed of each ablation)."""
         if not seeds or any(seed < 0 for seed in seeds):
             raise ValueError(f"seeds must be non-negative integers, got {list(seeds)}")
-        return replace(self, models=tuple(replace(m, seeds=tuple(seeds)) for m in self.models),
+        return replace(self, models=tuple(m if m.weights else replace(m, seeds=tuple(seeds))
+                                          for m in self.models),
                        seeds_override=tuple(seeds))
 
 
@@ -246,9 +269,8 @@ def run_report(config: ReportConfig, progress: bool = True, log=print) -> Path:
     first_estimator = None
     for model in config.models:
         for seed in model.seeds:
-            checkpoint = ensure_checkpoint(model.configs, seed, config.train_missing)
-            checkpoints[f"{model.name} (seed {seed})"] = checkpoint
-            estimator, data = load_estimator(checkpoint)
+            estimator, data, source = model.load(seed, config.train_missing)
+            checkpoints[f"{model.name} (seed {seed})"] = source
             first_estimator = first_estimator or estimator
             # every precision without collision handling, the collision passes at the first
             variants = [(p, "none") for p in config.precisions if "none" in model.collisions]
@@ -287,7 +309,7 @@ def run_report(config: ReportConfig, progress: bool = True, log=print) -> Path:
         extra_sequences = load_test_sequences(_test_split(dataset), body)
         rows_ = []
         for model in config.models:
-            estimator, data = load_estimator(checkpoints[f"{model.name} (seed {model.seeds[0]})"])
+            estimator, data, _ = model.load(model.seeds[0], train_missing=False)
             rows_.append(evaluate_estimator(model.name, estimator, extra_sequences,
                                             data.get("sigma", DESCRIPTOR_SIGMA),
                                             data.get("seed", 0)).row())
