@@ -295,8 +295,9 @@ def build_parser() -> argparse.ArgumentParser:
                        "in one run: a folder of Markdown, CSV and PNG (trains missing models)")
     report.add_argument("-c", "--config", required=True, help="configs/report/<name>.yaml")
     report.add_argument("--seeds", type=int, nargs="+", default=None, metavar="SEED",
-                        help="train and measure these seeds of every model instead of the "
-                             "config's (e.g. --seeds 0: one run per ablation)")
+                        help="train and measure these seeds of every model trained from "
+                             "configs instead of the config's (e.g. --seeds 0: one run per "
+                             "ablation)")
     report.set_defaults(run=_report)
 
     ship = commands.add_parser(

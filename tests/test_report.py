@@ -132,10 +132,26 @@ def test_report_measures_every_method_on_the_same_sequences(tiny_windows, tiny_b
     assert again[0]['mean_mm'] == pytest.approx(float(by_method['tiny estimator']['mean_mm']),
                                                 rel=1e-4)
     assert '## the test split again' in text
-    # a finished run is reused: a second report trains nothing
+    # a finished run is reused: a second report trains nothing; the same network exported as
+    # weights and named by a model entry measures the same
+    from swingar_pyg.training.checkpoints import export_weights
+
     stamp = (tmp_path / 'estimator' / 'checkpoints' / 'last.ckpt').stat().st_mtime_ns
-    run_report(config, progress=False, log=lambda *_: None)
+    checkpoint = json.loads((report.parent / 'report.json').read_text())['checkpoints']
+    export_weights(checkpoint['tiny estimator (seed 0)'], tmp_path / 'tiny.pt')
+    with_weights = report_yaml.read_text().replace(
+        'models:\n', f'models:\n  - {{name: tiny weights, weights: {tmp_path / "tiny.pt"}}}\n')
+    report_yaml.write_text(with_weights.replace('precisions: [fp32, bf16, fp32-compiled]',
+                                                'precisions: [fp32]'))
+    again_report = run_report(ReportConfig.from_yaml(report_yaml), progress=False,
+                              log=lambda *_: None)
     assert (tmp_path / 'estimator' / 'checkpoints' / 'last.ckpt').stat().st_mtime_ns == stamp
+    rows = {row['method']: row for row in csv.DictReader(
+        (again_report.parent / 'error_vs_time.csv').read_text().splitlines())}
+    assert float(rows['tiny weights']['mean_mm']) == pytest.approx(
+        float(rows['tiny estimator']['mean_mm']), rel=1e-5)
+    assert f'tiny weights (seed 0): `weights {tmp_path / "tiny.pt"} (sha256 ' in \
+        again_report.read_text()
 
 
 def test_equal_error_speedup_interpolates_the_simulator_curve():
@@ -181,18 +197,29 @@ def test_report_configs_parse_and_bad_ones_are_refused(tmp_path):
     shipped = ReportConfig.from_yaml('configs/report/base.yaml').models[0]
     estimator, data, source = shipped.load(seed=0, train_missing=False)
     reference = SwinGarEstimator.from_pretrained(shipped.weights)
-    assert source == f'weights {shipped.weights}' and set(data) == {'sigma', 'seed'}
+    assert source.startswith('weights ') and source.split()[1].endswith('weights/base.pt')
+    assert set(data) == {'sigma', 'seed'}
     for name, value in reference.state_dict().items():
         assert torch.equal(estimator.state_dict()[name], value), name
     bad = tmp_path / 'bad.yaml'
     bad.write_text('name: x\noutput: y\ndataset: z\nmodels: [{name: m, configs: [c], '
                    'weights: base}]\n')
-    with pytest.raises(ValueError, match='either configs .* or weights'):
+    with pytest.raises(ValueError, match='names both configs and weights'):
         ReportConfig.from_yaml(bad)
     bad.write_text('name: x\noutput: y\ndataset: z\nmodels: [{name: m, weights: base, '
                    'seeds: [0, 1]}]\n')
-    with pytest.raises(ValueError, match='is a weights file: it has no seeds'):
+    with pytest.raises(ValueError, match='measured from weights: it has no seeds'):
         ReportConfig.from_yaml(bad)
+    bad.write_text('name: x\noutput: y\ndataset: z\nmodels: [{name: m, weights: nowhere}]\n')
+    with pytest.raises(ValueError, match="no shipped weights named 'nowhere'"):
+        ReportConfig.from_yaml(bad)
+    mixed = tmp_path / 'mixed.yaml'
+    mixed.write_text('name: x\noutput: y\ndataset: z\nmodels: [{name: m, weights: base}, '
+                     '{name: n, configs: [configs/quickstart.yaml]}]\n')
+    assert [m.seeds for m in ReportConfig.from_yaml(mixed).with_seeds((1, 2)).models] == \
+        [(0,), (1, 2)]
+    with pytest.raises(ValueError, match='measures weights only'):
+        ReportConfig.from_yaml('configs/report/base.yaml').with_seeds((1,))
     bad.write_text('name: x\noutput: y\ndataset: z\nmodels: [{name: m, configs: [c], '
                    'collisions: [neural]}]\n')
     with pytest.raises(ValueError, match='names no body_sdf'):

@@ -14,6 +14,7 @@ sizes to stream, and the stability suite's size. See ``configs/report/quickstart
 from __future__ import annotations
 
 import glob
+import hashlib
 import platform
 import time
 from dataclasses import dataclass, field, replace
@@ -37,6 +38,7 @@ from swingar_pyg.eval.stability import FULL, SMALL, run_stability
 from swingar_pyg.eval.stream_speed import stream_speed
 from swingar_pyg.geometry.spectral import DESCRIPTOR_SIGMA
 from swingar_pyg.models import SwinGarEstimator
+from swingar_pyg.models.pretrained import weights_path
 from swingar_pyg.training import load_body_sdf, load_estimator, load_pretrained
 from swingar_pyg.training.cli import build_cli
 from swingar_pyg.world.body import AnnyBody
@@ -58,21 +60,31 @@ class ModelSpec:
 
     @classmethod
     def from_entry(cls, entry: dict) -> "ModelSpec":
-        """A ``models:`` entry of a report config."""
-        if ("configs" in entry) == ("weights" in entry):
-            raise ValueError(f"model {entry.get('name')!r} needs either configs (to train) "
-                             "or weights (a shipped name or .pt file), not both")
-        if "weights" in entry and entry.get("seeds", [0]) != [0]:
-            raise ValueError(f"model {entry['name']!r} is a weights file: it has no seeds")
-        return cls(entry["name"], tuple(entry.get("configs", ())),
-                   tuple(entry.get("seeds", (0,))), tuple(entry.get("collisions", ("none",))),
-                   entry.get("weights"))
+        """A ``models:`` entry of a report config; a ``weights`` entry must name
+        an existing file."""
+        name = entry["name"]
+        if "configs" in entry and "weights" in entry:
+            raise ValueError(f"model {name!r} names both configs and weights; a model is "
+                             "either trained from configs or measured from weights")
+        if "weights" not in entry:
+            return cls(name, tuple(entry["configs"]), tuple(entry.get("seeds", (0,))),
+                       tuple(entry.get("collisions", ("none",))))
+        weights = entry["weights"]
+        if not isinstance(weights, str) or not weights:
+            raise ValueError(f"model {name!r}: weights must be a shipped name or a .pt path, "
+                             f"got {weights!r}")
+        weights_path(weights)
+        if "seeds" in entry:
+            raise ValueError(f"model {name!r} is measured from weights: it has no seeds")
+        return cls(name, (), (0,), tuple(entry.get("collisions", ("none",))), weights)
 
     def load(self, seed: int, train_missing: bool) -> tuple[SwinGarEstimator, dict, str]:
         """The estimator of ``seed`` in eval mode, its descriptor settings, and where
         it came from (a checkpoint, trained first if missing, or the weights)."""
         if self.weights is not None:
-            return *load_pretrained(self.weights), f"weights {self.weights}"
+            path = weights_path(self.weights)
+            digest = hashlib.sha256(path.read_bytes()).hexdigest()[:12]
+            return *load_pretrained(path), f"weights {path} (sha256 {digest}...)"
         checkpoint = ensure_checkpoint(self.configs, seed, train_missing)
         return *load_estimator(checkpoint), checkpoint
 
@@ -125,7 +137,7 @@ class ReportConfig:
                 test_sequences=raw.get("test_sequences"))
         except KeyError as missing:
             raise ValueError(f"{path}: the report config needs {missing}") from None
-        except TypeError as error:
+        except (TypeError, ValueError) as error:
             raise ValueError(f"{path}: {error}") from None
         for model in config.models:
             unknown = set(model.collisions) - {"none", "exact", "neural"}
@@ -148,10 +160,14 @@ class ReportConfig:
         return config
 
     def with_seeds(self, seeds: tuple[int, ...]) -> "ReportConfig":
-        """The same report over ``seeds`` for every model (``swingar report
-        --seeds 0`` trains and measures one seed of each ablation)."""
+        """The same report over ``seeds`` for every model trained from configs
+        (``swingar report --seeds 0`` trains and measures one seed of each
+        ablation); a model measured from weights has none."""
         if not seeds or any(seed < 0 for seed in seeds):
             raise ValueError(f"seeds must be non-negative integers, got {list(seeds)}")
+        if all(m.weights for m in self.models):
+            raise ValueError(f"report {self.name!r} measures weights only: it has no seeds "
+                             "to replace")
         return replace(self, models=tuple(m if m.weights else replace(m, seeds=tuple(seeds))
                                           for m in self.models),
                        seeds_override=tuple(seeds))
@@ -265,12 +281,14 @@ def run_report(config: ReportConfig, progress: bool = True, log=print) -> Path:
             handlers[key] = NeuralCollisions.for_body(body_sdf, body, shape)
         return handlers[key]
 
-    results, checkpoints, per_model = [], {}, {}
+    results, checkpoints, per_model, first_seeds = [], {}, {}, {}
     first_estimator = None
     for model in config.models:
         for seed in model.seeds:
             estimator, data, source = model.load(seed, config.train_missing)
             checkpoints[f"{model.name} (seed {seed})"] = source
+            if seed == model.seeds[0]:
+                first_seeds[model.name] = estimator, data
             first_estimator = first_estimator or estimator
             # every precision without collision handling, the collision passes at the first
             variants = [(p, "none") for p in config.precisions if "none" in model.collisions]
@@ -309,7 +327,7 @@ def run_report(config: ReportConfig, progress: bool = True, log=print) -> Path:
         extra_sequences = load_test_sequences(_test_split(dataset), body)
         rows_ = []
         for model in config.models:
-            estimator, data, _ = model.load(model.seeds[0], train_missing=False)
+            estimator, data = first_seeds[model.name]
             rows_.append(evaluate_estimator(model.name, estimator, extra_sequences,
                                             data.get("sigma", DESCRIPTOR_SIGMA),
                                             data.get("seed", 0)).row())

@@ -229,7 +229,7 @@ def write_report(out: Path, config, *, machine, test_path, sequences, results, p
               if stored.get("stall_ratio") else "")
            if stored.get("max_substeps") else "") + ").",
         "",
-        "Checkpoints: " + "; ".join(f"{k}: `{v}`" for k, v in checkpoints.items()) +
+        "Models: " + "; ".join(f"{k}: `{v}`" for k, v in checkpoints.items()) +
         (f"; body SDF: `{body_sdf}`" if body_sdf else "") + ".",
         "",
         "## Error against run time",
