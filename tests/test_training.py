@@ -54,6 +54,9 @@ def test_offset_losses_are_the_mean_squared_blend_shapes_and_correction(tiny_win
     torch.testing.assert_close(terms['correction'], correction.square().sum())
     plain = SwinGarModule(estimator, collision_weight=0.0)
     assert not {'blend', 'correction'} & set(plain._losses(batch, plain(batch)))
+    with pytest.raises(ValueError, match='correction_weight needs the detail network'):
+        SwinGarModule(SwinGarEstimator(**{**SMALL_ESTIMATOR, 'detail': False}),
+                      correction_weight=0.1)
 
 
 def _small_fit_args(tiny_windows, root) -> list[str]:

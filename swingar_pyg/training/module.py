@@ -46,6 +46,9 @@ class SwinGarModule(L.LightningModule):
                  collision_margin: float = 0.004, lr: float = 1e-3,
                  weight_decay: float = 0.0, compile: bool = False):
         super().__init__()
+        if correction_weight and estimator.detail is None:
+            raise ValueError("correction_weight needs the detail network; the estimator was "
+                             "built with detail=False")
         save_hyperparameters_with_network(self, "estimator")
         self.estimator = estimator
         self._network = torch.compile(estimator) if compile else estimator
