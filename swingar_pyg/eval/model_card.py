@@ -13,7 +13,6 @@ re-measure the shipped weights and compare (``tests/test_shipped_model.py``).
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import tempfile
@@ -31,7 +30,7 @@ from swingar_pyg.eval.error_vs_time import (
     load_test_sequences,
 )
 from swingar_pyg.models import SwinGarEstimator
-from swingar_pyg.models.pretrained import WEIGHTS_DIR
+from swingar_pyg.models.pretrained import WEIGHTS_DIR, weights_sha256
 from swingar_pyg.sim import SIMULATOR_REVISION
 from swingar_pyg.training import export_weights, garment_family, load_pretrained
 from swingar_pyg.world.body import AnnyBody
@@ -104,10 +103,6 @@ def check_slice_figures(estimator: SwinGarEstimator, data_settings: dict, body=N
         return measure(estimator, data_settings, sequences, progress)
 
 
-def _sha256(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()
-
-
 def check_weights_name(name: str) -> str:
     """A weights name is a file stem: no folders, no suffix."""
     if not name or Path(name).name != name or name.endswith((".pt", ".json", ".md")):
@@ -174,7 +169,8 @@ def ship_weights(checkpoint: str | Path, name: str, dataset: str | Path,
                                      progress)
         check = check_slice_figures(estimator, data_settings, body, check_slice, progress)
         card = {
-            "name": name, "weights": f"{name}.pt", "sha256": _sha256(staged / f"{name}.pt"),
+            "name": name, "weights": f"{name}.pt",
+            "sha256": weights_sha256(staged / f"{name}.pt"),
             "parameters": sum(p.numel() for p in estimator.parameters()),
             "estimator": provenance["estimator"], "descriptor": provenance["data"],
             "data": {"config": str(dataset), "name": config.name,

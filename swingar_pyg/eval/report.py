@@ -14,7 +14,6 @@ sizes to stream, and the stability suite's size. See ``configs/report/quickstart
 from __future__ import annotations
 
 import glob
-import hashlib
 import platform
 import time
 from dataclasses import dataclass, field, replace
@@ -38,7 +37,7 @@ from swingar_pyg.eval.stability import FULL, SMALL, run_stability
 from swingar_pyg.eval.stream_speed import stream_speed
 from swingar_pyg.geometry.spectral import DESCRIPTOR_SIGMA
 from swingar_pyg.models import SwinGarEstimator
-from swingar_pyg.models.pretrained import weights_path
+from swingar_pyg.models.pretrained import weights_path, weights_sha256
 from swingar_pyg.training import load_body_sdf, load_estimator, load_pretrained
 from swingar_pyg.training.cli import build_cli
 from swingar_pyg.world.body import AnnyBody
@@ -83,7 +82,7 @@ class ModelSpec:
         it came from (a checkpoint, trained first if missing, or the weights)."""
         if self.weights is not None:
             path = weights_path(self.weights)
-            digest = hashlib.sha256(path.read_bytes()).hexdigest()[:12]
+            digest = weights_sha256(path)[:12]
             return *load_pretrained(path), f"weights {path} (sha256 {digest}...)"
         checkpoint = ensure_checkpoint(self.configs, seed, train_missing)
         return *load_estimator(checkpoint), checkpoint
@@ -282,14 +281,12 @@ def run_report(config: ReportConfig, progress: bool = True, log=print) -> Path:
         return handlers[key]
 
     results, checkpoints, per_model, first_seeds = [], {}, {}, {}
-    first_estimator = None
     for model in config.models:
         for seed in model.seeds:
             estimator, data, source = model.load(seed, config.train_missing)
             checkpoints[f"{model.name} (seed {seed})"] = source
             if seed == model.seeds[0]:
                 first_seeds[model.name] = estimator, data
-            first_estimator = first_estimator or estimator
             # every precision without collision handling, the collision passes at the first
             variants = [(p, "none") for p in config.precisions if "none" in model.collisions]
             variants += [(config.precisions[0], c) for c in model.collisions if c != "none"]
@@ -304,6 +301,7 @@ def run_report(config: ReportConfig, progress: bool = True, log=print) -> Path:
                 if seed == model.seeds[0]:
                     results.append(result)
                 per_model.setdefault(label, []).append(result)
+    first_estimator = first_seeds[config.models[0].name][0] if config.models else None
     rigid = evaluate_rigid(sequences)
     log("simulator at other settings")
     chosen = _spread(sequences, config.simulator_sequences)

@@ -16,6 +16,7 @@ is a JSON file beside it, ``<name>.json``.
 
 from __future__ import annotations
 
+import hashlib
 from pathlib import Path
 
 import torch
@@ -25,6 +26,11 @@ from swingar_pyg.atomic import atomic_path
 WEIGHTS_FORMAT = 1
 WEIGHTS_DIR = Path(__file__).resolve().parent.parent / "weights"
 _KEYS = ("format", "estimator", "state_dict", "data")
+
+
+def weights_sha256(path: str | Path) -> str:
+    """The hex sha256 of a weights file, which names its exact contents."""
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
 def shipped_weights() -> list[str]:
