@@ -5,11 +5,12 @@ largest edge strain ends above the 6 % stretch bar.
     OMP_NUM_THREADS=1 python benchmarks/bench_truth.py --quick    # two garments, two motions
 
 Each garment of ``GARMENTS`` (one or two of every family the world makes: procedural skirts
-and dresses, sewn t-shirts and jumpsuits, the shipped MakeHuman pieces) is dressed on the
-default anny body and simulated for ``--seconds`` on each motion of ``MOTIONS`` (procedural
-families, some played fast, and the shipped captured clips) at the datasets' setting (100 x 1,
-frames above the bar re-run up to 400 substeps, warp backend, bending every 10th substep); the
-captured clips also with their upper arms turned 20 degrees from the body (``arms_out``).
+and dresses, sewn t-shirts and jumpsuits, the shipped MakeHuman pieces as they are and each
+with its short edges merged) is dressed on the default anny body and simulated for
+``--seconds`` on each motion of ``MOTIONS`` (procedural families, some played fast, and the
+shipped captured clips) at the datasets' setting (100 x 1, frames above the bar re-run up to
+400 substeps, warp backend, bending every 10th substep); the captured clips also with their
+upper arms turned 20 degrees from the body (``arms_out``).
 Recorded per run: the share of frames above the bar, the median and largest of the frames'
 largest strain, the mean substeps a frame and the time a frame. One run's largest strain is
 chaotic (``bench_strain.py`` repeats runs); the share of frames above the bar is the steadier
@@ -35,6 +36,7 @@ from common import machine_info, write_results  # noqa: E402
 from swingar_pyg.sim import SIMULATOR_REVISION, STRETCH_BAR, XPBDSettings  # noqa: E402
 from swingar_pyg.world.body import AnnyBody  # noqa: E402
 from swingar_pyg.world.catalogue import fit_garment, garment_spec  # noqa: E402
+from swingar_pyg.world.garment_assets import shipped_garments  # noqa: E402
 from swingar_pyg.world.motion_library import make_motion  # noqa: E402
 from swingar_pyg.world.sequence import simulate_sequence  # noqa: E402
 
@@ -55,6 +57,11 @@ GARMENTS = {
     "MakeHuman shorts": {"kind": "shipped", "name": "shorts"},
     "MakeHuman overall": {"kind": "shipped", "name": "overall_jumpsuit"},
 }
+# Every shipped piece with its edges under half the median merged (the datasets' setting for
+# them: swingar_pyg.geometry.merge_short_edges).
+GARMENTS.update({f"MakeHuman {name}, edges merged": {"kind": "shipped", "name": name,
+                                                      "merge_edges_below": 0.5}
+                 for name in shipped_garments()})
 # name: (source, speed, amplitude, arms out in degrees)
 MOTIONS = {
     "sway": ("sway", 1.0, 1.0, 0.0), "twist": ("twist", 1.0, 1.0, 0.0),

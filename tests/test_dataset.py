@@ -162,6 +162,8 @@ def test_configs_take_dresses_and_shipped_garments(tmp_path):
         tiny_config(tmp_path, TINY.replace('{{length: 0.6,', '{{kind: cape, length: 0.6,'))
     with pytest.raises(ValueError, match='subdivisions'):
         ShippedGarmentSpec('overall_jumpsuit', 5)
+    with pytest.raises(ValueError, match='merge_edges_below'):
+        ShippedGarmentSpec('shorts', merge_edges_below=1.0)
 
 
 def test_a_split_of_blocks_pairs_each_block_and_keeps_earlier_jobs(tmp_path):

@@ -1,5 +1,6 @@
 """Mesh geometry on numpy/scipy (preprocessing) and torch (batched, differentiable)."""
 
+from swingar_pyg.geometry.edge_collapse import merge_short_edges
 from swingar_pyg.geometry.geodesic import (
     edge_length_graph,
     farthest_point_sampling,
@@ -53,6 +54,7 @@ __all__ = [
     "load_mesh",
     "mesh_edge_index",
     "mesh_edges",
+    "merge_short_edges",
     "roll_into_cylinder",
     "sheet",
     "split_quads",

@@ -15,15 +15,19 @@ from swingar_pyg.world.skirt import DressSpec, SkirtSpec, fit_procedural_skirt
 @dataclass(frozen=True)
 class ShippedGarmentSpec:
     """A shipped MakeHuman garment (:func:`~swingar_pyg.world.garment_assets.shipped_garments`)
-    carried onto the body, its triangles split ``subdivisions`` times (4x the
+    carried onto the body: its edges shorter than ``merge_edges_below`` times the median
+    merged when that is above 0, then its triangles split ``subdivisions`` times (4x the
     faces each) for other resolutions of the same topology."""
 
     name: str
     subdivisions: int = 0
+    merge_edges_below: float = 0.0
 
     def __post_init__(self):
         if not 0 <= self.subdivisions <= 3:
             raise ValueError(f"subdivisions must be in [0, 3], got {self.subdivisions}")
+        if not 0.0 <= self.merge_edges_below < 1.0:
+            raise ValueError(f"merge_edges_below must be in [0, 1), got {self.merge_edges_below}")
 
 
 def garment_spec(entry: dict):
@@ -44,8 +48,10 @@ def garment_spec(entry: dict):
 def fit_garment(spec, body: BodyModel, shape) -> Garment:
     """Any garment spec fitted on ``body`` with ``shape`` in its rest pose."""
     if isinstance(spec, ShippedGarmentSpec):
-        garment = fit_shipped_garment(spec.name, body, shape, spec.subdivisions)
-        suffix = f"-s{spec.subdivisions}" if spec.subdivisions else ""
+        garment = fit_shipped_garment(spec.name, body, shape, spec.subdivisions,
+                                      spec.merge_edges_below)
+        suffix = (f"-m{spec.merge_edges_below:g}" if spec.merge_edges_below else "") + (
+            f"-s{spec.subdivisions}" if spec.subdivisions else "")
         return Garment(garment.name + suffix, garment.mesh, garment.pinned, garment.skin_indices,
                        garment.skin_weights, garment.fit)
     if isinstance(spec, SkirtSpec):

@@ -21,8 +21,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from swingar_pyg.geometry.edge_collapse import merge_short_edges
 from swingar_pyg.geometry.mesh import Mesh, as_mesh, load_mesh
 from swingar_pyg.geometry.surface_embedding import embed_points, evaluate_embedding
+from swingar_pyg.geometry.weld import weld_mesh
 from swingar_pyg.world.body import BodyModel
 from swingar_pyg.world.garment import Garment, garment_on_body
 
@@ -65,15 +67,20 @@ def _hm08_body() -> np.ndarray:
 
 
 def fit_shipped_garment(name: str, body: BodyModel, shape: torch.Tensor,
-                        subdivisions: int = 0) -> Garment:
+                        subdivisions: int = 0, merge_edges_below: float = 0.0) -> Garment:
     """A shipped garment carried onto ``body`` with ``shape``, in its rest pose.
 
     Pinned: the garment's highest boundary loops (waistband, neckline, straps), skinned to
-    the torso. The fit attribute is measured on the new body. ``subdivisions``
-    splits every triangle into four that many times first (trimesh's midpoint
-    subdivision: the same surface at a finer resolution).
+    the torso. The fit attribute is measured on the new body. ``merge_edges_below`` > 0
+    welds the mesh and merges its edges shorter than that fraction of the median edge
+    length (:func:`~swingar_pyg.geometry.edge_collapse.merge_short_edges`: the shipped
+    meshes' sub-millimetre seam edges otherwise take a solver's leftover error as strain).
+    ``subdivisions`` then splits every triangle into four that many times (trimesh's
+    midpoint subdivision: the same surface at a finer resolution).
     """
     garment = load_shipped_garment(name)
+    if merge_edges_below:
+        garment = merge_short_edges(weld_mesh(garment)[0], merge_edges_below)[0]
     if subdivisions:
         import trimesh
 
