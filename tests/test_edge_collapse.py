@@ -2,7 +2,14 @@ import numpy as np
 import pytest
 import trimesh
 
-from swingar_pyg.geometry import as_mesh, boundary_edges, merge_short_edges, mesh_edges, sheet
+from swingar_pyg.geometry import (
+    Mesh,
+    as_mesh,
+    boundary_edges,
+    merge_short_edges,
+    mesh_edges,
+    sheet,
+)
 from swingar_pyg.geometry.weld import weld_mesh
 from swingar_pyg.world.garment_assets import load_shipped_garment, shipped_garments
 
@@ -92,6 +99,18 @@ def test_a_mesh_without_short_edges_is_left_as_it_is():
 def test_a_ratio_outside_zero_one_is_refused(ratio):
     with pytest.raises(ValueError, match='ratio must be in'):
         merge_short_edges(sheet(3, 3), ratio)
+
+
+def test_bad_meshes_are_refused_and_zero_area_faces_left_alone():
+    mesh, _ = squeezed_sheet()
+    vertices = mesh.vertices.copy()
+    vertices[3] = np.nan
+    with pytest.raises(ValueError, match='not finite'):
+        merge_short_edges(Mesh(vertices, mesh.faces), 0.5)
+    # a face repeating a vertex (unwelded input): the edges around it stay, the rest merge
+    faces = np.concatenate([mesh.faces, [[0, 0, 1]]])
+    merged, _ = merge_short_edges(as_mesh(mesh.vertices, faces), 0.5)
+    assert len(merged.vertices) == len(mesh.vertices) - 8 and np.isfinite(merged.vertices).all()
 
 
 @pytest.mark.parametrize('name', shipped_garments())

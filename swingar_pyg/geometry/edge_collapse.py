@@ -35,17 +35,20 @@ def merge_short_edges(mesh: Mesh, ratio: float) -> tuple[Mesh, np.ndarray]:
     collapsed (see the module's text for which collapses are allowed).
 
     Args:
-        mesh: a triangle mesh (welded: :func:`~swingar_pyg.geometry.weld.weld_mesh`).
+        mesh: a triangle mesh, welded (:func:`~swingar_pyg.geometry.weld.weld_mesh`): an
+            edge next to a face of zero area is left as it is.
         ratio: in (0, 1); 0.5 merges the edges shorter than half the median.
 
     Returns:
         The new mesh and ``new_index`` ``(N,)``: where each old vertex went.
 
     Raises:
-        ValueError: if ``ratio`` is outside (0, 1).
+        ValueError: if ``ratio`` is outside (0, 1), or for a mesh :func:`as_mesh` refuses
+            (no faces, vertices not finite, indices out of range).
     """
     if not 0.0 < ratio < 1.0:
         raise ValueError(f"ratio must be in (0, 1), got {ratio}")
+    mesh = as_mesh(mesh.vertices, mesh.faces)
     vertices = np.array(mesh.vertices, dtype=np.float64)
     faces = np.array(mesh.faces, dtype=np.int64)
     n = len(vertices)
