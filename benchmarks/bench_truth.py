@@ -57,8 +57,8 @@ GARMENTS = {
     "MakeHuman shorts": {"kind": "shipped", "name": "shorts"},
     "MakeHuman overall": {"kind": "shipped", "name": "overall_jumpsuit"},
 }
-# Every shipped piece with its edges under half the median merged (the datasets' setting for
-# them: swingar_pyg.geometry.merge_short_edges).
+# Every shipped piece with its edges under half the median merged
+# (swingar_pyg.geometry.merge_short_edges; the base data's setting for its MakeHuman tops).
 GARMENTS.update({f"MakeHuman {name}, edges merged": {"kind": "shipped", "name": name,
                                                       "merge_edges_below": 0.5}
                  for name in shipped_garments()})

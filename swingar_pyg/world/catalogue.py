@@ -50,7 +50,7 @@ def fit_garment(spec, body: BodyModel, shape) -> Garment:
     if isinstance(spec, ShippedGarmentSpec):
         garment = fit_shipped_garment(spec.name, body, shape, spec.subdivisions,
                                       spec.merge_edges_below)
-        suffix = (f"-m{spec.merge_edges_below:g}" if spec.merge_edges_below else "") + (
+        suffix = (f"-m{spec.merge_edges_below}" if spec.merge_edges_below else "") + (
             f"-s{spec.subdivisions}" if spec.subdivisions else "")
         return Garment(garment.name + suffix, garment.mesh, garment.pinned, garment.skin_indices,
                        garment.skin_weights, garment.fit)
