@@ -7,6 +7,7 @@ from torch_geometric.data import Batch
 
 from swingar_pyg.inference import SwinGarStream
 from swingar_pyg.models import SwinGarEstimator, pose_window
+from swingar_pyg.models.estimator import skin_points
 from swingar_pyg.models.pose_features import heading_rotation
 from tests.windows import SMALL_ESTIMATOR
 
@@ -83,6 +84,47 @@ def test_untrained_estimator_is_rigid_skinning(tiny_windows):
     assert torch.allclose(out.vertices.transpose(0, 1), batch.rigid, atol=2e-5)
 
 
+def test_cloth_lying_on_the_body_is_skinned_rigidly_with_a_clearance_scale(tiny_windows):
+    batch = next(iter(tiny_windows.val_dataloader()))
+    lying = torch.arange(batch.num_nodes) % 2 == 0  # every other vertex on the body
+    batch.fit = torch.where(lying, 0.0, 0.05)
+    # every joint moved its own way, so the skinning weights matter
+    transforms = torch.eye(4).repeat(*batch.joint_transforms.shape[:3], 1, 1)
+    transforms[..., :3, :3] = random_rotations(transforms[..., 0, 0].numel()).view(
+        *transforms.shape[:3], 3, 3)
+    transforms[..., :3, 3] = 0.1 * torch.randn(*transforms.shape[:3], 3)
+    batch.joint_transforms = transforms
+    prior = batch.prior_weights.clamp_min(1e-6)
+    rigid = torch.stack([skin_points(batch.rest, prior / prior.sum(-1, keepdim=True),
+                                     transforms[:, k], batch.batch) for k in range(3)])
+    ungated = trained_like()
+    torch.nn.init.normal_(ungated.skinning_head.bias, std=1.0)  # weights off the prior's
+    gated = trained_like(clearance_scale=0.02)
+    gated.load_state_dict(ungated.state_dict())
+    with torch.no_grad():
+        free, faded = ungated(batch), gated(batch)
+    # each learned term moves the ungated estimator off rigid skinning everywhere
+    for head in ('skinning_head', 'blend_head', 'correction'):
+        alone = copy.deepcopy(ungated)
+        for other in {'skinning_head', 'blend_head', 'correction'} - {head}:
+            torch.nn.init.zeros_(getattr(alone, other).weight)
+            torch.nn.init.zeros_(getattr(alone, other).bias)
+        with torch.no_grad():
+            assert (alone(batch).vertices - rigid).norm(dim=-1)[:, lying].mean() > 1e-3, head
+    for output in (faded.vertices, faded.skinned):
+        assert torch.allclose(output[:, lying], rigid[:, lying], atol=2e-5)
+        assert (output[:, ~lying] - rigid[:, ~lying]).norm(dim=-1).min() > 1e-4
+    # with room far beyond the scale the gate is one: the ungated estimator
+    batch.fit = torch.full_like(batch.fit, 1.0)
+    with torch.no_grad():
+        assert torch.allclose(gated(batch).vertices, ungated(batch).vertices, atol=1e-6)
+    for scale in (0.0, -0.01, float('nan')):
+        with pytest.raises(ValueError, match='clearance_scale must be positive'):
+            SwinGarEstimator(**{**SMALL_ESTIMATOR, 'clearance_scale': scale})
+    with pytest.raises(ValueError, match='needs skinning_prior'):
+        SwinGarEstimator(**{**SMALL_ESTIMATOR, 'clearance_scale': 0.02, 'skinning_prior': False})
+
+
 def test_batch_equals_each_garment_alone(tiny_windows):
     dataset = tiny_windows.datasets['train']
     windows = [dataset[0], dataset[len(dataset) - 1], dataset[3]]
@@ -94,11 +136,11 @@ def test_batch_equals_each_garment_alone(tiny_windows):
     assert torch.allclose(together, alone, atol=1e-5)
 
 
-@pytest.mark.parametrize('detail', [True, False])
-def test_stream_equals_the_windowed_estimator(tiny_windows, detail):
+@pytest.mark.parametrize('options', [{}, {'detail': False}, {'clearance_scale': 0.02}])
+def test_stream_equals_the_windowed_estimator(tiny_windows, options):
     dataset = tiny_windows.datasets['test']
     sequence = dataset.sequences[0]
-    model = trained_like(detail=detail)
+    model = trained_like(**options)
     window = dataset[0]
     stream = SwinGarStream(model, window, sequence.body_shape, sequence.fps)
     with torch.no_grad():
@@ -182,6 +224,10 @@ def test_bad_windows_are_refused_by_name(tiny_windows):
     broken.prior_weights = window.prior_weights[:, :5]
     with pytest.raises(ValueError, match='prior_weights'):
         model(Batch.from_data_list([broken]))
+    no_fit = copy.copy(window)
+    no_fit.fit = window.fit[:, None].expand(-1, 2)
+    with pytest.raises(ValueError, match=r'data.fit must have shape \(N,\)'):
+        model(Batch.from_data_list([no_fit]))
     with pytest.raises(ValueError, match='descriptors of length 32'):
         SwinGarEstimator(**{**SMALL_ESTIMATOR, 'descriptor_size': 32})(
             Batch.from_data_list([window]))
@@ -192,6 +238,11 @@ def test_bad_windows_are_refused_by_name(tiny_windows):
     infinite.rest[0, 0] = float('inf')
     with pytest.raises(ValueError, match='not finite'):
         model(Batch.from_data_list([infinite]))
+    unknown_room = copy.copy(window)
+    unknown_room.fit = window.fit.clone()
+    unknown_room.fit[1] = float('nan')
+    with pytest.raises(ValueError, match=r'clearances \(data.fit\) are not finite'):
+        model(Batch.from_data_list([unknown_room]))
 
 
 

@@ -60,6 +60,7 @@ class SwinGarStream:
         history = estimator.history
         with torch.no_grad():
             edge_index, self.features, self.shape_code = estimator.encode_garment(garment)
+        self.gate = estimator.clearance_gate(garment.fit)
         # EdgeIndex does not trace; compiled code gets the plain tensor.
         self.edge_index = edge_index.as_tensor() if compile else edge_index
         self._rotations: deque[Tensor] = deque(maxlen=history + 1)
@@ -132,4 +133,4 @@ class SwinGarStream:
         state = detail.step_from_input_terms(terms_now, self.edge_index, state)
         return self.estimator.correct(skinned, state[0], body_code,
                                       frame_rotation[None].expand(self.graphs, -1, -1),
-                                      self.batch)
+                                      self.batch, self.gate)

@@ -27,6 +27,15 @@ Beyond the paper: the skinning logits are added to :math:`\log` of the weights
 transferred from the body (``skinning_prior``), and the last layers of both
 heads and of the correction start at zero, so an untrained estimator is exactly
 rigid skinning with transferred weights and training starts from that baseline.
+With a ``clearance_scale`` :math:`d_0`, each learned term of vertex :math:`i`
+(skinning logits, blend shape, correction) is scaled by its rest clearance
+:math:`c_i` (the garment's ``fit``),
+
+.. math::
+    g_i = 1 - \exp\left(-\max(c_i, 0) / d_0\right),
+
+so cloth lying on the body (:math:`c_i = 0`) is rigidly skinned whatever the
+network predicts, and the learned terms fade in over the first :math:`d_0` of room.
 Positions fed to :math:`M_d` and its correction are in the canonical frame
 (:mod:`~swingar_pyg.models.pose_features`) of their own frame, so the correction
 turns with the body and a frame's input to :math:`M_d` is the same in every window
@@ -116,6 +125,9 @@ class SwinGarEstimator(nn.Module):
         detail_channels (int): state size of :math:`M_d` and of the body code;
             its four gate heads make it the costliest layer per channel.
             (default: :obj:`32`)
+        clearance_scale (float, optional): :math:`d_0` in metres, the rest
+            clearance over which the learned terms fade in (needs the skinning
+            prior); :obj:`None` applies them everywhere. (default: :obj:`None`)
     """
 
     def __init__(self, num_joints: int = 31, shape_size: int = 6, channels: int = 64,
@@ -123,14 +135,21 @@ class SwinGarEstimator(nn.Module):
                  heads: int = 1, alpha: float = 2.0, normalize: bool = True,
                  descriptor_size: int | None = 256, history: int = 64,
                  skinning_prior: bool = True, detail: bool = True,
-                 detail_channels: int = 32):
+                 detail_channels: int = 32, clearance_scale: float | None = None):
         super().__init__()
         if history < 1:
             raise ValueError(f"the pose history needs at least one frame, got {history}")
+        if clearance_scale is not None:
+            if not clearance_scale > 0:
+                raise ValueError(f"clearance_scale must be positive metres, got {clearance_scale}")
+            if not skinning_prior:
+                raise ValueError("clearance_scale fades the learned terms into rigid skinning "
+                                 "and needs skinning_prior=True")
         self.num_joints = num_joints
         self.descriptor_size = descriptor_size
         self.history = history
         self.skinning_prior = skinning_prior
+        self.clearance_scale = clearance_scale
         pose_size = pose_feature_size(num_joints)
         stack = dict(heads=heads, alpha=alpha, normalize=normalize, add_self_loops=False)
         self.garment_encoder = FCAStack(7, channels, garment_layers, **stack)
@@ -186,6 +205,13 @@ class SwinGarEstimator(nn.Module):
             shape_code = self.shape_parser(descriptor_features(data.descriptor))[batch_vector(data)]
         return edge_index, features, shape_code
 
+    def clearance_gate(self, fit: Tensor) -> Tensor | None:
+        """:math:`g` ``(N, 1)`` of the rest clearances ``fit`` ``(N,)``, or
+        :obj:`None` without a ``clearance_scale``."""
+        if self.clearance_scale is None:
+            return None
+        return -torch.expm1(-fit.clamp_min(0.0) / self.clearance_scale).unsqueeze(-1)
+
     def motion_codes(self, pose_history: Tensor, history_mask: Tensor) -> Tensor:
         """:math:`M_m`: ``(G, F, m, P)`` windows and masks ``(G, F, m)`` → ``(G, F, C)``."""
         graphs, frames, length, size = pose_history.shape
@@ -209,10 +235,13 @@ class SwinGarEstimator(nn.Module):
         :math:`\mathbf{B}` ``(N, 3)`` of one frame, given its motion code ``(G, C)``."""
         state = self.state_encoder(garment_features * motion_code[batch_vector(data)], edge_index)
         hidden = self.predictor(state * shape_code, edge_index)
-        logits = self.skinning_head(hidden)
+        logits, blend = self.skinning_head(hidden), self.blend_head(hidden)
+        gate = self.clearance_gate(data.fit)
+        if gate is not None:
+            logits, blend = gate * logits, gate * blend
         if self.skinning_prior:
             logits = logits + torch.log(data.prior_weights.clamp_min(_PRIOR_FLOOR))
-        return torch.softmax(logits, dim=-1), self.blend_head(hidden)
+        return torch.softmax(logits, dim=-1), blend
 
     def skin(self, data, edge_index: Tensor, garment_features: Tensor, shape_code: Tensor,
              motion_code: Tensor, transforms: Tensor) -> Tensor:
@@ -234,27 +263,30 @@ class SwinGarEstimator(nn.Module):
         return torch.cat([local, distances], dim=-1)
 
     def correct(self, skinned: Tensor, hidden: Tensor, body_code: Tensor,
-                frame_rotation: Tensor, batch: Tensor) -> Tensor:
+                frame_rotation: Tensor, batch: Tensor, gate: Tensor | None = None) -> Tensor:
         r"""Adds :math:`\mathbf{R}_c\, \mathrm{Linear}(\mathbf{h} \odot
         \mathbf{c}_b)` to ``skinned`` ``(N, 3)`` at one frame, given the detail
-        state ``(N, C)``, per garment the body code ``(G, C)`` and the frame's
-        canonical rotation ``(G, 3, 3)``."""
+        state ``(N, C)``, per garment the body code ``(G, C)``, the frame's
+        canonical rotation ``(G, 3, 3)`` and the :meth:`clearance_gate` ``(N, 1)``."""
         correction = self.correction(hidden * body_code[batch])
+        if gate is not None:
+            correction = gate * correction
         return skinned + torch.einsum("nab,nb->na", frame_rotation[batch], correction)
 
     def refine(self, edge_index: Tensor, batch: Tensor, skinned: Tensor,
                joint_positions: Tensor, body_codes: Tensor, frame_rotation: Tensor,
-               frame_origin: Tensor) -> Tensor:
+               frame_origin: Tensor, gate: Tensor | None = None) -> Tensor:
         r""":math:`M_d`: adds the detail correction to ``skinned`` ``(F, N, 3)``,
         given per garment and frame the joint positions ``(G, F, J, 3)``, body
-        codes ``(G, F, C)`` and canonical frames ``(G, F, 3, 3)``, ``(G, F, 3)``."""
+        codes ``(G, F, C)`` and canonical frames ``(G, F, 3, 3)``, ``(G, F, 3)``,
+        and the :meth:`clearance_gate` ``(N, 1)``."""
         inputs = torch.stack([
             self.detail_inputs(skinned[k], joint_positions[:, k], frame_rotation[:, k],
                                frame_origin[:, k], batch) for k in range(len(skinned))])
         hidden, _ = self.detail(inputs, edge_index)
         return torch.stack([
-            self.correct(skinned[k], hidden[k], body_codes[:, k], frame_rotation[:, k], batch)
-            for k in range(len(skinned))])
+            self.correct(skinned[k], hidden[k], body_codes[:, k], frame_rotation[:, k], batch,
+                         gate) for k in range(len(skinned))])
 
     def forward(self, data) -> EstimatorOutput:
         _check_window(data, self.num_joints, self.history)
@@ -271,7 +303,8 @@ class SwinGarEstimator(nn.Module):
             return EstimatorOutput(skinned, skinned, blend)
         codes = self.body_codes(data.body_shape, data.pose_history)
         vertices = self.refine(edge_index, batch, skinned, data.joint_positions, codes,
-                               data.frame_rotation, data.frame_origin)
+                               data.frame_rotation, data.frame_origin,
+                               self.clearance_gate(data.fit))
         return EstimatorOutput(vertices, skinned, blend)
 
 
@@ -283,16 +316,18 @@ def batch_vector(data) -> Tensor:
 
 
 def _check_window(data, num_joints: int, history: int) -> None:
-    expected = {"rest": (3,), "normal": (3,), "prior_weights": (num_joints,)}
+    expected = {"rest": (3,), "normal": (3,), "fit": (), "prior_weights": (num_joints,)}
     for name, tail in expected.items():
         value = getattr(data, name, None)
         if value is None or tuple(value.shape[1:]) != tail:
             got = None if value is None else tuple(value.shape)
-            raise ValueError(f"data.{name} must have shape (N, {', '.join(map(str, tail))}), "
-                             f"got {got}")
+            shape = f"(N, {', '.join(map(str, tail))})" if tail else "(N,)"
+            raise ValueError(f"data.{name} must have shape {shape}, got {got}")
     windows = data.pose_history.shape
     if windows[1:3] != (TARGET_FRAMES, history):
         raise ValueError(f"data.pose_history must hold {TARGET_FRAMES} windows of {history} "
                          f"frames, got shape {tuple(windows)}")
     if not torch.isfinite(data.rest).all():
         raise ValueError("the garment's rest vertices are not finite")
+    if not torch.isfinite(data.fit).all():
+        raise ValueError("the garment's rest clearances (data.fit) are not finite")
