@@ -153,6 +153,22 @@ def _preview(args: argparse.Namespace) -> int:
     return 0
 
 
+def _metres(text: str) -> float:
+    """An argparse type: a finite length in metres, zero or more."""
+    value = float(text)
+    if not 0.0 <= value < float("inf"):
+        raise argparse.ArgumentTypeError(f"expected finite metres >= 0, got {text}")
+    return value
+
+
+def _positive_metres(text: str) -> float:
+    """An argparse type: a finite length in metres above zero."""
+    value = _metres(text)
+    if value == 0.0:
+        raise argparse.ArgumentTypeError(f"expected metres > 0, got {text}")
+    return value
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="swingar",
@@ -314,6 +330,13 @@ def build_parser() -> argparse.ArgumentParser:
                       help="another dataset config whose test split is measured (repeatable)")
     ship.add_argument("--command", dest="training_command", default=None,
                       help="the training command, for the card")
+    ship.add_argument("--clearance-scale", type=_positive_metres, default=None, metavar="M",
+                      help="set the estimator's clearance gate on the trained network: "
+                           "learned terms fade in over M metres of rest clearance "
+                           "(SwinGarEstimator's clearance_scale)")
+    ship.add_argument("--contact-clearance", type=_metres, default=None, metavar="M",
+                      help="with --clearance-scale: the rest clearance of cloth lying on the "
+                           "body, skinned rigidly (e.g. 0.006, the dressing clearance)")
     ship.add_argument("--out-dir", default=None, help="default: swingar_pyg/weights")
     ship.set_defaults(run=_ship_weights)
 
@@ -359,8 +382,11 @@ def _ship_weights(args: argparse.Namespace) -> int:
     from swingar_pyg.models.pretrained import WEIGHTS_DIR
 
     extra = labelled_configs(args.extra_test, "--extra-test")
+    settings = {key: value for key, value in (("clearance_scale", args.clearance_scale),
+                                              ("contact_clearance", args.contact_clearance))
+                if value is not None}
     card = ship_weights(args.ckpt, args.name, args.data, extra, args.training_command,
-                        args.out_dir or WEIGHTS_DIR)
+                        args.out_dir or WEIGHTS_DIR, settings=settings)
     print(card.with_suffix(".md").read_text())
     print(f"wrote {card.with_suffix('.pt')}, {card} and {card.with_suffix('.md')}")
     return 0

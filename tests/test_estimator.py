@@ -87,7 +87,7 @@ def test_untrained_estimator_is_rigid_skinning(tiny_windows):
 def test_cloth_lying_on_the_body_is_skinned_rigidly_with_a_clearance_scale(tiny_windows):
     batch = next(iter(tiny_windows.val_dataloader()))
     lying = torch.arange(batch.num_nodes) % 2 == 0  # every other vertex on the body
-    batch.fit = torch.where(lying, 0.0, 0.05)
+    batch.fit = torch.where(lying, 0.006, 0.05)
     # every joint moved its own way, so the skinning weights matter
     transforms = torch.eye(4).repeat(*batch.joint_transforms.shape[:3], 1, 1)
     transforms[..., :3, :3] = random_rotations(transforms[..., 0, 0].numel()).view(
@@ -99,7 +99,7 @@ def test_cloth_lying_on_the_body_is_skinned_rigidly_with_a_clearance_scale(tiny_
                                      transforms[:, k], batch.batch) for k in range(3)])
     ungated = trained_like()
     torch.nn.init.normal_(ungated.skinning_head.bias, std=1.0)  # weights off the prior's
-    gated = trained_like(clearance_scale=0.02)
+    gated = trained_like(clearance_scale=0.02, contact_clearance=0.006)
     gated.load_state_dict(ungated.state_dict())
     with torch.no_grad():
         free, faded = ungated(batch), gated(batch)
@@ -115,12 +115,16 @@ def test_cloth_lying_on_the_body_is_skinned_rigidly_with_a_clearance_scale(tiny_
         assert torch.allclose(output[:, lying], rigid[:, lying], atol=2e-5)
         assert (output[:, ~lying] - rigid[:, ~lying]).norm(dim=-1).min() > 1e-4
     # with room far beyond the scale the gate is one: the ungated estimator
-    batch.fit = torch.full_like(batch.fit, 1.0)
+    batch.fit = torch.full_like(batch.fit, 1.006)
     with torch.no_grad():
         assert torch.allclose(gated(batch).vertices, ungated(batch).vertices, atol=1e-6)
     for scale in (0.0, -0.01, float('nan')):
         with pytest.raises(ValueError, match='clearance_scale must be positive'):
             SwinGarEstimator(**{**SMALL_ESTIMATOR, 'clearance_scale': scale})
+    for contact in (-0.001, float('inf')):
+        with pytest.raises(ValueError, match='contact_clearance must be finite'):
+            SwinGarEstimator(**{**SMALL_ESTIMATOR, 'clearance_scale': 0.02,
+                                'contact_clearance': contact})
     with pytest.raises(ValueError, match='needs skinning_prior'):
         SwinGarEstimator(**{**SMALL_ESTIMATOR, 'clearance_scale': 0.02, 'skinning_prior': False})
 

@@ -87,7 +87,8 @@ def test_ship_weights_writes_weights_and_a_card_that_re_measures(tiny_checkpoint
     card_path = ship_weights(tiny_checkpoint, 'tiny', tiny_windows.hparams.config,
                              extra_tests={'again': tiny_windows.hparams.config},
                              command='swingar fit (3 steps)', out_dir=tmp_path,
-                             check_slice=TINY_CHECK_SLICE, progress=False)
+                             check_slice=TINY_CHECK_SLICE, progress=False,
+                             settings={'clearance_scale': 0.03, 'contact_clearance': 0.006})
     assert sorted(p.name for p in tmp_path.iterdir()) == ['tiny.json', 'tiny.md', 'tiny.pt']
     card = json.loads(card_path.read_text())
     assert card['training']['step'] == 3 and card['data']['simulator_revisions'] == [
@@ -96,6 +97,9 @@ def test_ship_weights_writes_weights_and_a_card_that_re_measures(tiny_checkpoint
     trained, _ = load_estimator(tiny_checkpoint)
     for name, value in trained.state_dict().items():
         assert torch.equal(shipped.state_dict()[name], value), name
+    assert trained.clearance_scale is None  # the gate is set on the trained network
+    assert (shipped.clearance_scale, shipped.contact_clearance) == (0.03, 0.006)
+    assert card['set_at_export'] == {'clearance_scale': 0.03, 'contact_clearance': 0.006}
     test = card['figures']['test']
     assert set(test) == {'all', 'skirt'} and test['all'] == test['skirt']
     assert card['figures']['again'] == test  # the same split measured twice
@@ -104,6 +108,7 @@ def test_ship_weights_writes_weights_and_a_card_that_re_measures(tiny_checkpoint
     assert again == card['check_slice']['figures']  # deterministic on one machine
     markdown = (tmp_path / 'tiny.md').read_text()
     assert f"{test['all']['estimator_mean_mm']:.1f}" in markdown
+    assert 'Set at export, not in training' in markdown
 
 
 def test_ship_weights_cli_refuses_bad_arguments_before_any_work(tmp_path, capsys):
@@ -114,7 +119,9 @@ def test_ship_weights_cli_refuses_bad_arguments_before_any_work(tmp_path, capsys
             (['--extra-test', 'nolabel'], '--extra-test takes LABEL=CONFIG'),
             (['--name', 'base.pt'], 'a weights name is a bare file stem'),
             (['--name', '../x'], 'a weights name is a bare file stem'),
-            (['--data', str(tmp_path / 'none.yaml')], 'no dataset config at')):
+            (['--data', str(tmp_path / 'none.yaml')], 'no dataset config at'),
+            (['--clearance-scale', '0'], 'expected metres > 0'),
+            (['--contact-clearance', 'nan'], 'expected finite metres >= 0')):
         with pytest.raises(SystemExit):
             main(['ship-weights', '--ckpt', 'x.ckpt', '--name', 'x', '--data', 'd.yaml',
                   *arguments, '--out-dir', str(tmp_path)])
@@ -147,5 +154,8 @@ def test_ship_weights_leaves_nothing_when_it_fails(tiny_checkpoint, tiny_windows
     with pytest.raises(ValueError, match='no test split at .*swingar make-dataset'):
         ship_weights(tiny_checkpoint, 'tiny', tiny_windows.hparams.config,
                      extra_tests={'unmade': str(unmade)}, out_dir=out, progress=False)
+    with pytest.raises(ValueError, match='only clearance_scale, contact_clearance can be set'):
+        ship_weights(tiny_checkpoint, 'tiny', tiny_windows.hparams.config, out_dir=out,
+                     progress=False, settings={'channels': 8})
     assert [p.name for p in out.iterdir()] == ['tiny.json']
     assert (out / 'tiny.json').read_text() == '{"the": "old card"}'

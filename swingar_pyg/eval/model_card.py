@@ -137,8 +137,9 @@ def made_test_split(config_path: str | Path) -> tuple[DatasetConfig, Path]:
 def ship_weights(checkpoint: str | Path, name: str, dataset: str | Path,
                  extra_tests: dict[str, str] | None = None, command: str | None = None,
                  out_dir: str | Path = WEIGHTS_DIR, check_slice: dict = CHECK_SLICE,
-                 progress: bool = True) -> Path:
-    """Exports ``checkpoint`` as ``<out_dir>/<name>.pt``, measures it on the test
+                 progress: bool = True, settings: dict | None = None) -> Path:
+    """Exports ``checkpoint`` as ``<out_dir>/<name>.pt`` (with the estimator
+    ``settings`` of :func:`~swingar_pyg.training.export_weights`), measures it on the test
     split of ``dataset`` (the config it was trained on), on each of ``extra_tests``
     (``{label: dataset config}``) and on ``check_slice`` (a dataset recipe with one
     test split), and writes the card ``<name>.json`` and ``<name>.md``. Returns
@@ -156,7 +157,7 @@ def ship_weights(checkpoint: str | Path, name: str, dataset: str | Path,
     out_dir.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(dir=out_dir, prefix=f".{name}-") as staging:
         staged = Path(staging)
-        provenance = export_weights(checkpoint, staged / f"{name}.pt")
+        provenance = export_weights(checkpoint, staged / f"{name}.pt", settings)
         trained_on = provenance["datamodule"].get("config")
         if trained_on is not None and Path(trained_on).resolve() != Path(dataset).resolve():
             raise ValueError(f"{checkpoint} was trained on {trained_on}, not {dataset}: "
@@ -172,7 +173,8 @@ def ship_weights(checkpoint: str | Path, name: str, dataset: str | Path,
             "name": name, "weights": f"{name}.pt",
             "sha256": weights_sha256(staged / f"{name}.pt"),
             "parameters": sum(p.numel() for p in estimator.parameters()),
-            "estimator": provenance["estimator"], "descriptor": provenance["data"],
+            "estimator": provenance["estimator"], "set_at_export": dict(settings or {}),
+            "descriptor": provenance["data"],
             "data": {"config": str(dataset), "name": config.name,
                      "simulator_revisions": sorted(simulator_revisions(test_path)),
                      "solver": {k: getattr(config.solver, k) for k in
@@ -219,6 +221,8 @@ def card_markdown(card: dict) -> str:
         f"`{card['name']}.json`, which holds every figure below.", "",
         "## Network", "",
         "```json", json.dumps(card["estimator"], indent=1), "```", "",
+        *([f"Set at export, not in training: `{json.dumps(card['set_at_export'])}`.", ""]
+          if card.get("set_at_export") else []),
         f"Descriptor: sigma {card['descriptor']['sigma']}, seed {card['descriptor']['seed']}.", "",
         "## Training data", "",
         f"`{data['config']}` (test split made by simulator revision(s) "

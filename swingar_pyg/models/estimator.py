@@ -28,14 +28,18 @@ transferred from the body (``skinning_prior``), and the last layers of both
 heads and of the correction start at zero, so an untrained estimator is exactly
 rigid skinning with transferred weights and training starts from that baseline.
 With a ``clearance_scale`` :math:`d_0`, each learned term of vertex :math:`i`
-(skinning logits, blend shape, correction) is scaled by its rest clearance
-:math:`c_i` (the garment's ``fit``),
+(skinning logits, blend shape, correction) is scaled by a gate of its rest
+clearance :math:`c_i` (the garment's ``fit``),
 
 .. math::
-    g_i = 1 - \exp\left(-\max(c_i, 0) / d_0\right),
+    g_i = 1 - \exp\left(-\max(c_i - c_0, 0) / d_0\right),
 
-so cloth lying on the body (:math:`c_i = 0`) is rigidly skinned whatever the
-network predicts, and the learned terms fade in over the first :math:`d_0` of room.
+so cloth lying on the body (no more than the ``contact_clearance`` :math:`c_0`
+from it) is rigidly skinned whatever the network predicts, and the learned terms
+fade in over the next :math:`d_0` of room. The gate holds no parameters: it can be
+set on an estimator trained without it (``swingar ship-weights --clearance-scale``),
+which guards the close-fitting cloth more strictly than training with it, where
+the network learns to push against it.
 Positions fed to :math:`M_d` and its correction are in the canonical frame
 (:mod:`~swingar_pyg.models.pose_features`) of their own frame, so the correction
 turns with the body and a frame's input to :math:`M_d` is the same in every window
@@ -128,6 +132,10 @@ class SwinGarEstimator(nn.Module):
         clearance_scale (float, optional): :math:`d_0` in metres, the rest
             clearance over which the learned terms fade in (needs the skinning
             prior); :obj:`None` applies them everywhere. (default: :obj:`None`)
+        contact_clearance (float, optional): :math:`c_0` in metres, the rest
+            clearance of cloth lying on the body, e.g. the dressing clearance
+            of :func:`~swingar_pyg.world.garment.garment_on_body`.
+            (default: :obj:`0.0`)
     """
 
     def __init__(self, num_joints: int = 31, shape_size: int = 6, channels: int = 64,
@@ -135,7 +143,8 @@ class SwinGarEstimator(nn.Module):
                  heads: int = 1, alpha: float = 2.0, normalize: bool = True,
                  descriptor_size: int | None = 256, history: int = 64,
                  skinning_prior: bool = True, detail: bool = True,
-                 detail_channels: int = 32, clearance_scale: float | None = None):
+                 detail_channels: int = 32, clearance_scale: float | None = None,
+                 contact_clearance: float = 0.0):
         super().__init__()
         if history < 1:
             raise ValueError(f"the pose history needs at least one frame, got {history}")
@@ -145,11 +154,15 @@ class SwinGarEstimator(nn.Module):
             if not skinning_prior:
                 raise ValueError("clearance_scale fades the learned terms into rigid skinning "
                                  "and needs skinning_prior=True")
+        if not 0.0 <= contact_clearance < float("inf"):
+            raise ValueError(f"contact_clearance must be finite metres >= 0, "
+                             f"got {contact_clearance}")
         self.num_joints = num_joints
         self.descriptor_size = descriptor_size
         self.history = history
         self.skinning_prior = skinning_prior
         self.clearance_scale = clearance_scale
+        self.contact_clearance = contact_clearance
         pose_size = pose_feature_size(num_joints)
         stack = dict(heads=heads, alpha=alpha, normalize=normalize, add_self_loops=False)
         self.garment_encoder = FCAStack(7, channels, garment_layers, **stack)
@@ -210,7 +223,8 @@ class SwinGarEstimator(nn.Module):
         :obj:`None` without a ``clearance_scale``."""
         if self.clearance_scale is None:
             return None
-        return -torch.expm1(-fit.clamp_min(0.0) / self.clearance_scale).unsqueeze(-1)
+        room = (fit - self.contact_clearance).clamp_min(0.0)
+        return -torch.expm1(-room / self.clearance_scale).unsqueeze(-1)
 
     def motion_codes(self, pose_history: Tensor, history_mask: Tensor) -> Tensor:
         """:math:`M_m`: ``(G, F, m, P)`` windows and masks ``(G, F, m)`` → ``(G, F, C)``."""

@@ -39,18 +39,29 @@ def load_pretrained(name_or_path: str | Path = "base") -> tuple[SwinGarEstimator
     return SwinGarEstimator.from_weights(record), record["data"]
 
 
-def export_weights(checkpoint: str | Path, out: str | Path) -> dict:
+#: Estimator arguments that hold no parameters and may be set on a trained
+#: network when it is exported: the clearance gate.
+EXPORT_SETTINGS = ("clearance_scale", "contact_clearance")
+
+
+def export_weights(checkpoint: str | Path, out: str | Path,
+                   settings: dict | None = None) -> dict:
     """Writes the estimator of a ``swingar fit`` checkpoint as a weights file
-    (:mod:`swingar_pyg.models.pretrained`); returns what the model card needs
-    from the checkpoint: the estimator's arguments, the data and training
+    (:mod:`swingar_pyg.models.pretrained`), with its :data:`EXPORT_SETTINGS`
+    replaced by ``settings``; returns what the model card needs from the
+    checkpoint: the estimator's arguments, the data and training
     hyperparameters, and the step."""
+    unknown = set(settings or {}) - set(EXPORT_SETTINGS)
+    if unknown:
+        raise ValueError(f"only {', '.join(EXPORT_SETTINGS)} can be set at export, "
+                         f"got {', '.join(sorted(unknown))}")
     path = _existing(checkpoint, "no checkpoint")
     saved = torch.load(path, map_location="cpu", weights_only=False)
     network = saved["hyper_parameters"].get("estimator")
     if not isinstance(network, dict) or "init_args" not in network:
         raise ValueError(f"{checkpoint} was not written by `swingar fit` with a config "
                          "(its hyperparameters lack the estimator's init_args)")
-    arguments = dict(network["init_args"])
+    arguments = {**network["init_args"], **(settings or {})}
     data = saved.get("datamodule_hyper_parameters", {})
     settings = {"sigma": float(data.get("sigma", DESCRIPTOR_SIGMA)),
                 "seed": int(data.get("seed", 0))}
