@@ -1,0 +1,101 @@
+"""The clearance gate set on a trained estimator: its error per garment family against rigid
+skinning for several gates, on a dataset's test split.
+
+Each learned term of vertex :math:`i` (skinning logits, blend shape, detail correction) is
+scaled by
+
+.. math::
+    g_i = 1 - \\exp\\left(-\\max(c_i - c_0, 0) / d_0\\right),
+
+with :math:`c_i` its rest clearance from the body, :math:`c_0` the clearance of cloth lying
+on the body and :math:`d_0` the scale over which the terms fade in
+(``SwinGarEstimator(clearance_scale=d_0, contact_clearance=c_0)``). The gate holds no
+parameters, so one set of weights is measured under each gate: what close-fitting cloth gains
+against what the free-swinging families lose.
+
+    python benchmarks/bench_gate.py --weights base --data configs/data/base.yaml \\
+        --extra-test "overall=configs/data/jumpsuit.yaml" --stride 4 \\
+        --gates none 6:10 6:20 6:30 6:60 0:30
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from bench_terms import split_sequences
+from common import machine_info, write_results
+
+from swingar_pyg.eval.model_card import labelled_configs, measure
+from swingar_pyg.models import SwinGarEstimator
+from swingar_pyg.models.pretrained import read_weights
+from swingar_pyg.world.body import AnnyBody
+
+
+def parse_gate(text: str) -> dict:
+    """``none`` or ``C0:D0`` (millimetres) → the estimator's gate arguments."""
+    if text == "none":
+        return {"clearance_scale": None, "contact_clearance": 0.0}
+    contact, _, scale = text.partition(":")
+    try:
+        return {"clearance_scale": float(scale) / 1000, "contact_clearance": float(contact) / 1000}
+    except ValueError:
+        raise ValueError(f"--gates takes 'none' or C0:D0 in millimetres, got {text!r}") from None
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--weights", default="base", help="a shipped name or a .pt file")
+    parser.add_argument("--data", default="configs/data/base.yaml")
+    parser.add_argument("--extra-test", action="append", default=[], metavar="LABEL=CONFIG",
+                        help="another dataset config whose test split is measured")
+    parser.add_argument("--stride", type=int, default=1,
+                        help="every k-th sequence of each split (default: all)")
+    parser.add_argument("--gates", nargs="+", default=["none", "6:10", "6:30"],
+                        help="'none' or C0:D0, the contact clearance and scale in mm")
+    parser.add_argument("--name", default="bench_gate")
+    args = parser.parse_args()
+    if args.stride < 1:
+        raise ValueError(f"--stride must be >= 1, got {args.stride}")
+    gates = {text: parse_gate(text) for text in args.gates}
+    splits = {"test": args.data, **labelled_configs(args.extra_test, "--extra-test")}
+
+    record = read_weights(args.weights)
+    body = AnnyBody()
+    sequences = {label: split_sequences(config, body, args.stride)
+                 for label, config in splits.items()}
+    figures = {}
+    for text, gate in gates.items():
+        estimator = SwinGarEstimator.from_weights(
+            {**record, "estimator": {**record["estimator"], **gate}})
+        figures[text] = {label: measure(estimator, record["data"], chosen)
+                         for label, chosen in sequences.items()}
+        for label, rows in figures[text].items():
+            print(f"{text:>6} {label:>10}: " + ", ".join(
+                f"{family} {row['estimator_mean_mm']:.1f} ({row['mean_ratio']:.2f} / "
+                f"{row['p95_ratio']:.2f})" for family, row in rows.items()), flush=True)
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    panels = [(label, family) for label, rows in figures[args.gates[0]].items()
+              for family in rows]
+    figure, axis = plt.subplots(figsize=(1.2 * len(gates) + 3, 4))
+    for label, family in panels:
+        axis.plot(range(len(gates)), [figures[g][label][family]["mean_ratio"] for g in gates],
+                  marker="o", label=family if label == "test" else f"{label}: {family}")
+    axis.axhline(1.0, color="black", lw=0.8)
+    axis.set_xticks(range(len(gates)), [g if g == "none" else f"c0 {g.replace(':', ', d0 ')}"
+                                        for g in gates], rotation=30, ha="right")
+    axis.set(yscale="log", ylabel="mean error / rigid skinning's",
+             title=f"clearance gate on {args.weights} (mm)")
+    axis.grid(alpha=0.3, which="both")
+    axis.legend(fontsize=7, loc="upper right")
+    write_results(args.name, {"machine": machine_info(), "weights": str(args.weights),
+                              "splits": splits, "stride": args.stride, "gates": gates,
+                              "figures": figures}, figure)
+
+
+if __name__ == "__main__":
+    main()
