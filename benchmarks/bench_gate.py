@@ -15,12 +15,13 @@ against what the free-swinging families lose.
 
     python benchmarks/bench_gate.py --weights base --data configs/data/base.yaml \\
         --extra-test "overall=configs/data/jumpsuit.yaml" --stride 4 \\
-        --gates none 6:10 6:20 6:30 6:60 0:30
+        --gates none 6:10 6:30 6:60 0:30
 """
 
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from bench_terms import split_sequences
 from common import machine_info, write_results
@@ -39,7 +40,15 @@ def parse_gate(text: str) -> dict:
     try:
         return {"clearance_scale": float(scale) / 1000, "contact_clearance": float(contact) / 1000}
     except ValueError:
-        raise ValueError(f"--gates takes 'none' or C0:D0 in millimetres, got {text!r}") from None
+        raise argparse.ArgumentTypeError(
+            f"expected 'none' or C0:D0 in millimetres, got {text!r}") from None
+
+
+def gate_label(gate: dict) -> str:
+    """The inverse of :func:`parse_gate`."""
+    if gate["clearance_scale"] is None:
+        return "none"
+    return f"{1000 * gate['contact_clearance']:g}:{1000 * gate['clearance_scale']:g}"
 
 
 def main() -> None:
@@ -50,23 +59,26 @@ def main() -> None:
                         help="another dataset config whose test split is measured")
     parser.add_argument("--stride", type=int, default=1,
                         help="every k-th sequence of each split (default: all)")
-    parser.add_argument("--gates", nargs="+", default=["none", "6:10", "6:30"],
+    parser.add_argument("--gates", nargs="+", type=parse_gate,
+                        default=[parse_gate(g) for g in ("none", "6:10", "6:30")],
                         help="'none' or C0:D0, the contact clearance and scale in mm")
     parser.add_argument("--name", default="bench_gate")
     args = parser.parse_args()
     if args.stride < 1:
-        raise ValueError(f"--stride must be >= 1, got {args.stride}")
-    gates = {text: parse_gate(text) for text in args.gates}
+        parser.error(f"--stride must be >= 1, got {args.stride}")
     splits = {"test": args.data, **labelled_configs(args.extra_test, "--extra-test")}
-
     record = read_weights(args.weights)
+    try:  # a bad gate fails here, before the test splits load
+        estimators = {gate_label(gate): SwinGarEstimator.from_weights(
+            {**record, "estimator": {**record["estimator"], **gate}}) for gate in args.gates}
+    except ValueError as error:
+        parser.error(str(error))
+
     body = AnnyBody()
     sequences = {label: split_sequences(config, body, args.stride)
                  for label, config in splits.items()}
     figures = {}
-    for text, gate in gates.items():
-        estimator = SwinGarEstimator.from_weights(
-            {**record, "estimator": {**record["estimator"], **gate}})
+    for text, estimator in estimators.items():
         figures[text] = {label: measure(estimator, record["data"], chosen)
                          for label, chosen in sequences.items()}
         for label, rows in figures[text].items():
@@ -79,8 +91,8 @@ def main() -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    panels = [(label, family) for label, rows in figures[args.gates[0]].items()
-              for family in rows]
+    gates = list(figures)
+    panels = [(label, family) for label, rows in figures[gates[0]].items() for family in rows]
     figure, axis = plt.subplots(figsize=(1.2 * len(gates) + 3, 4))
     for label, family in panels:
         axis.plot(range(len(gates)), [figures[g][label][family]["mean_ratio"] for g in gates],
@@ -89,11 +101,12 @@ def main() -> None:
     axis.set_xticks(range(len(gates)), [g if g == "none" else f"c0 {g.replace(':', ', d0 ')}"
                                         for g in gates], rotation=30, ha="right")
     axis.set(yscale="log", ylabel="mean error / rigid skinning's",
-             title=f"clearance gate on {args.weights} (mm)")
+             title=f"clearance gate on {Path(args.weights).name} (c0, d0 in mm)")
     axis.grid(alpha=0.3, which="both")
     axis.legend(fontsize=7, loc="upper right")
     write_results(args.name, {"machine": machine_info(), "weights": str(args.weights),
-                              "splits": splits, "stride": args.stride, "gates": gates,
+                              "splits": splits, "stride": args.stride,
+                              "gates": {gate_label(g): g for g in args.gates},
                               "figures": figures}, figure)
 
 

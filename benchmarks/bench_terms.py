@@ -24,7 +24,7 @@ import argparse
 import copy
 
 import torch
-from common import machine_info, write_results
+from common import clearance_gate, machine_info, write_results
 
 from swingar_pyg.eval.error_vs_time import load_test_sequences
 from swingar_pyg.eval.model_card import labelled_configs, made_test_split, measure
@@ -107,6 +107,7 @@ def main() -> None:
         axis.set(title=f"{label}: {family}", ylabel="mean vertex error (mm)")
         axis.grid(alpha=0.3, axis="y")
     write_results(args.name, {"machine": machine_info(), "weights": str(args.weights),
+                              "clearance_gate": clearance_gate(estimator),
                               "splits": splits, "stride": args.stride,
                               "variants": {k: list(v) for k, v in VARIANTS.items()},
                               "figures": figures}, figure)

@@ -42,6 +42,13 @@ def machine_info() -> dict[str, Any]:
     }
 
 
+def clearance_gate(estimator: torch.nn.Module) -> dict[str, float | None]:
+    """The clearance gate a trained estimator runs with, stored with its figures: shipped
+    weights may carry one (``swingar ship-weights --clearance-scale``)."""
+    return {"clearance_scale": estimator.clearance_scale,
+            "contact_clearance": estimator.contact_clearance}
+
+
 def median_seconds(function: Callable[[], Any], repeats: int, warmup: int = 1) -> float:
     """Median wall time of ``function`` over ``repeats`` calls, after ``warmup`` calls."""
     for _ in range(warmup):

@@ -18,7 +18,7 @@ import argparse
 from collections import defaultdict
 
 import torch
-from common import machine_info, write_results
+from common import clearance_gate, machine_info, write_results
 from torch_geometric.data import Batch
 
 from datamodules import SwinGarDataModule
@@ -92,6 +92,7 @@ def main() -> None:
     axis.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.0, 1.0))
     axis.grid(alpha=0.3, axis="y")
     write_results(args.name, {"machine": machine_info(), "weights": str(args.weights),
+                              "clearance_gate": clearance_gate(estimator),
                               "data": args.data, "stride": args.stride, "sizes": sizes}, figure)
 
 

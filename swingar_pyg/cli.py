@@ -155,7 +155,10 @@ def _preview(args: argparse.Namespace) -> int:
 
 def _metres(text: str) -> float:
     """An argparse type: a finite length in metres, zero or more."""
-    value = float(text)
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected metres, got {text!r}") from None
     if not 0.0 <= value < float("inf"):
         raise argparse.ArgumentTypeError(f"expected finite metres >= 0, got {text}")
     return value

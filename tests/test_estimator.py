@@ -86,8 +86,10 @@ def test_untrained_estimator_is_rigid_skinning(tiny_windows):
 
 def test_cloth_lying_on_the_body_is_skinned_rigidly_with_a_clearance_scale(tiny_windows):
     batch = next(iter(tiny_windows.val_dataloader()))
-    lying = torch.arange(batch.num_nodes) % 2 == 0  # every other vertex on the body
-    batch.fit = torch.where(lying, 0.006, 0.05)
+    index = torch.arange(batch.num_nodes)
+    lying = index % 2 == 0  # every other vertex on the body: at, within or inside c0
+    batch.fit = torch.where(lying, torch.tensor([0.006, 0.003, 0.0, -0.002])[index // 2 % 4],
+                            0.05)
     # every joint moved its own way, so the skinning weights matter
     transforms = torch.eye(4).repeat(*batch.joint_transforms.shape[:3], 1, 1)
     transforms[..., :3, :3] = random_rotations(transforms[..., 0, 0].numel()).view(
@@ -102,7 +104,7 @@ def test_cloth_lying_on_the_body_is_skinned_rigidly_with_a_clearance_scale(tiny_
     gated = trained_like(clearance_scale=0.02, contact_clearance=0.006)
     gated.load_state_dict(ungated.state_dict())
     with torch.no_grad():
-        free, faded = ungated(batch), gated(batch)
+        faded = gated(batch)
     # each learned term moves the ungated estimator off rigid skinning everywhere
     for head in ('skinning_head', 'blend_head', 'correction'):
         alone = copy.deepcopy(ungated)
@@ -114,12 +116,16 @@ def test_cloth_lying_on_the_body_is_skinned_rigidly_with_a_clearance_scale(tiny_
     for output in (faded.vertices, faded.skinned):
         assert torch.allclose(output[:, lying], rigid[:, lying], atol=2e-5)
         assert (output[:, ~lying] - rigid[:, ~lying]).norm(dim=-1).min() > 1e-4
+    # the gate's curve: 1 - exp(-room / d0)
+    room = torch.tensor([0.0, 0.02, 0.04])
+    assert torch.allclose(gated.clearance_gate(0.006 + room).squeeze(-1),
+                          1 - torch.exp(-room / 0.02), atol=1e-6)
     # with room far beyond the scale the gate is one: the ungated estimator
     batch.fit = torch.full_like(batch.fit, 1.006)
     with torch.no_grad():
         assert torch.allclose(gated(batch).vertices, ungated(batch).vertices, atol=1e-6)
-    for scale in (0.0, -0.01, float('nan')):
-        with pytest.raises(ValueError, match='clearance_scale must be positive'):
+    for scale in (0.0, -0.01, float('nan'), float('inf')):
+        with pytest.raises(ValueError, match='clearance_scale must be finite positive'):
             SwinGarEstimator(**{**SMALL_ESTIMATOR, 'clearance_scale': scale})
     for contact in (-0.001, float('inf')):
         with pytest.raises(ValueError, match='contact_clearance must be finite'):
@@ -160,7 +166,7 @@ def test_stream_equals_the_windowed_estimator(tiny_windows, options):
 def test_compiled_stream_equals_the_eager_stream(tiny_windows):
     dataset = tiny_windows.datasets['test']
     sequence = dataset.sequences[0]
-    model = trained_like()
+    model = trained_like(clearance_scale=0.02, contact_clearance=0.006)
     eager = SwinGarStream(model, dataset[0], sequence.body_shape, sequence.fps)
     compiled = SwinGarStream(model, dataset[0], sequence.body_shape, sequence.fps, compile=True)
     for t in range(5):
@@ -228,10 +234,10 @@ def test_bad_windows_are_refused_by_name(tiny_windows):
     broken.prior_weights = window.prior_weights[:, :5]
     with pytest.raises(ValueError, match='prior_weights'):
         model(Batch.from_data_list([broken]))
-    no_fit = copy.copy(window)
-    no_fit.fit = window.fit[:, None].expand(-1, 2)
+    fit_per_axis = copy.copy(window)
+    fit_per_axis.fit = window.fit[:, None].expand(-1, 2)
     with pytest.raises(ValueError, match=r'data.fit must have shape \(N,\)'):
-        model(Batch.from_data_list([no_fit]))
+        model(Batch.from_data_list([fit_per_axis]))
     with pytest.raises(ValueError, match='descriptors of length 32'):
         SwinGarEstimator(**{**SMALL_ESTIMATOR, 'descriptor_size': 32})(
             Batch.from_data_list([window]))

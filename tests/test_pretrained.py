@@ -108,7 +108,7 @@ def test_ship_weights_writes_weights_and_a_card_that_re_measures(tiny_checkpoint
     assert again == card['check_slice']['figures']  # deterministic on one machine
     markdown = (tmp_path / 'tiny.md').read_text()
     assert f"{test['all']['estimator_mean_mm']:.1f}" in markdown
-    assert 'Set at export, not in training' in markdown
+    assert 'Set on the trained network at export' in markdown
 
 
 def test_ship_weights_cli_refuses_bad_arguments_before_any_work(tmp_path, capsys):
@@ -121,7 +121,8 @@ def test_ship_weights_cli_refuses_bad_arguments_before_any_work(tmp_path, capsys
             (['--name', '../x'], 'a weights name is a bare file stem'),
             (['--data', str(tmp_path / 'none.yaml')], 'no dataset config at'),
             (['--clearance-scale', '0'], 'expected metres > 0'),
-            (['--contact-clearance', 'nan'], 'expected finite metres >= 0')):
+            (['--contact-clearance', 'nan'], 'expected finite metres >= 0'),
+            (['--clearance-scale', 'wide'], "expected metres, got 'wide'")):
         with pytest.raises(SystemExit):
             main(['ship-weights', '--ckpt', 'x.ckpt', '--name', 'x', '--data', 'd.yaml',
                   *arguments, '--out-dir', str(tmp_path)])
@@ -130,6 +131,29 @@ def test_ship_weights_cli_refuses_bad_arguments_before_any_work(tmp_path, capsys
     with pytest.raises(SystemExit):  # a checkpoint or shipped weights, not both
         main(['predict', '--ckpt', 'a.ckpt', '--weights', 'base', '--garment', 'g.obj'])
     assert 'not allowed with argument' in capsys.readouterr().err
+
+
+def test_ship_weights_cli_passes_the_gate_on(tmp_path, monkeypatch, capsys):
+    require('lightning')
+    import swingar_pyg.eval.model_card as model_card
+    from swingar_pyg.cli import main
+
+    received = {}
+
+    def recorded(*args, **kwargs):
+        received.update(kwargs)
+        raise SystemExit(0)
+
+    monkeypatch.setattr(model_card, 'ship_weights', recorded)
+    data = tmp_path / 'd.yaml'
+    data.write_text('name: d\n')
+    for options, settings in (([], {}),
+                              (['--clearance-scale', '0.06', '--contact-clearance', '0.006'],
+                               {'clearance_scale': 0.06, 'contact_clearance': 0.006})):
+        with pytest.raises(SystemExit):
+            main(['ship-weights', '--ckpt', 'x.ckpt', '--name', 'x', '--data', str(data),
+                  *options, '--out-dir', str(tmp_path)])
+        assert received['settings'] == settings
 
 
 def test_ship_weights_leaves_nothing_when_it_fails(tiny_checkpoint, tiny_windows, tmp_path):
@@ -154,8 +178,11 @@ def test_ship_weights_leaves_nothing_when_it_fails(tiny_checkpoint, tiny_windows
     with pytest.raises(ValueError, match='no test split at .*swingar make-dataset'):
         ship_weights(tiny_checkpoint, 'tiny', tiny_windows.hparams.config,
                      extra_tests={'unmade': str(unmade)}, out_dir=out, progress=False)
-    with pytest.raises(ValueError, match='only clearance_scale, contact_clearance can be set'):
-        ship_weights(tiny_checkpoint, 'tiny', tiny_windows.hparams.config, out_dir=out,
-                     progress=False, settings={'channels': 8})
+    for settings, message in (({'channels': 8}, 'only clearance_scale, contact_clearance'),
+                              ({'contact_clearance': 0.006}, 'does nothing without a'),
+                              ({'clearance_scale': float('inf')}, 'finite positive metres')):
+        with pytest.raises(ValueError, match=message):
+            ship_weights(tiny_checkpoint, 'tiny', tiny_windows.hparams.config, out_dir=out,
+                         progress=False, settings=settings)
     assert [p.name for p in out.iterdir()] == ['tiny.json']
     assert (out / 'tiny.json').read_text() == '{"the": "old card"}'

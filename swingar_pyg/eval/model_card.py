@@ -221,7 +221,7 @@ def card_markdown(card: dict) -> str:
         f"`{card['name']}.json`, which holds every figure below.", "",
         "## Network", "",
         "```json", json.dumps(card["estimator"], indent=1), "```", "",
-        *([f"Set at export, not in training: `{json.dumps(card['set_at_export'])}`.", ""]
+        *([f"Set on the trained network at export: `{json.dumps(card['set_at_export'])}`.", ""]
           if card.get("set_at_export") else []),
         f"Descriptor: sigma {card['descriptor']['sigma']}, seed {card['descriptor']['seed']}.", "",
         "## Training data", "",

@@ -113,7 +113,7 @@ class SwinGarStream:
     def _skin(self, motion: Tensor, joint_transforms: Tensor) -> Tensor:
         transforms = joint_transforms[None].expand(self.graphs, -1, -1, -1)
         return self.estimator.skin(self.garment, self.edge_index, self.features,
-                                   self.shape_code, motion, transforms)
+                                   self.shape_code, motion, transforms, self.gate)
 
     def _detail_input_terms(self, skinned: Tensor, joint_positions: Tensor,
                             frame_rotation: Tensor, frame_origin: Tensor) -> Tensor:

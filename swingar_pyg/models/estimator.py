@@ -149,8 +149,9 @@ class SwinGarEstimator(nn.Module):
         if history < 1:
             raise ValueError(f"the pose history needs at least one frame, got {history}")
         if clearance_scale is not None:
-            if not clearance_scale > 0:
-                raise ValueError(f"clearance_scale must be positive metres, got {clearance_scale}")
+            if not 0.0 < clearance_scale < float("inf"):
+                raise ValueError(f"clearance_scale must be finite positive metres, "
+                                 f"got {clearance_scale}")
             if not skinning_prior:
                 raise ValueError("clearance_scale fades the learned terms into rigid skinning "
                                  "and needs skinning_prior=True")
@@ -244,13 +245,15 @@ class SwinGarEstimator(nn.Module):
         return self.body_parser(torch.cat([shape, current], dim=-1))
 
     def skinning_terms(self, data, edge_index: Tensor, garment_features: Tensor,
-                       shape_code: Tensor, motion_code: Tensor) -> tuple[Tensor, Tensor]:
+                       shape_code: Tensor, motion_code: Tensor,
+                       gate: Tensor | None) -> tuple[Tensor, Tensor]:
         r"""The skinning weights :math:`\mathbf{W}` ``(N, J)`` and blend shapes
-        :math:`\mathbf{B}` ``(N, 3)`` of one frame, given its motion code ``(G, C)``."""
+        :math:`\mathbf{B}` ``(N, 3)`` of one frame, given its motion code ``(G, C)``;
+        the learned logits and blend shapes are scaled by the :meth:`clearance_gate`
+        ``(N, 1)`` (none: :obj:`None`)."""
         state = self.state_encoder(garment_features * motion_code[batch_vector(data)], edge_index)
         hidden = self.predictor(state * shape_code, edge_index)
         logits, blend = self.skinning_head(hidden), self.blend_head(hidden)
-        gate = self.clearance_gate(data.fit)
         if gate is not None:
             logits, blend = gate * logits, gate * blend
         if self.skinning_prior:
@@ -258,11 +261,12 @@ class SwinGarEstimator(nn.Module):
         return torch.softmax(logits, dim=-1), blend
 
     def skin(self, data, edge_index: Tensor, garment_features: Tensor, shape_code: Tensor,
-             motion_code: Tensor, transforms: Tensor) -> Tensor:
+             motion_code: Tensor, transforms: Tensor, gate: Tensor | None) -> Tensor:
         r""":math:`\mathbf{M}_c` at one frame, given that frame's motion code
-        ``(G, C)`` and skinning transforms ``(G, J, 4, 4)``: ``(N, 3)``."""
+        ``(G, C)``, skinning transforms ``(G, J, 4, 4)`` and :meth:`clearance_gate`:
+        ``(N, 3)``."""
         weights, blend = self.skinning_terms(data, edge_index, garment_features, shape_code,
-                                             motion_code)
+                                             motion_code, gate)
         return skin_points(data.rest + blend, weights, transforms, batch_vector(data))
 
     def detail_inputs(self, skinned: Tensor, joint_positions: Tensor, frame_rotation: Tensor,
@@ -277,7 +281,7 @@ class SwinGarEstimator(nn.Module):
         return torch.cat([local, distances], dim=-1)
 
     def correct(self, skinned: Tensor, hidden: Tensor, body_code: Tensor,
-                frame_rotation: Tensor, batch: Tensor, gate: Tensor | None = None) -> Tensor:
+                frame_rotation: Tensor, batch: Tensor, gate: Tensor | None) -> Tensor:
         r"""Adds :math:`\mathbf{R}_c\, \mathrm{Linear}(\mathbf{h} \odot
         \mathbf{c}_b)` to ``skinned`` ``(N, 3)`` at one frame, given the detail
         state ``(N, C)``, per garment the body code ``(G, C)``, the frame's
@@ -289,7 +293,7 @@ class SwinGarEstimator(nn.Module):
 
     def refine(self, edge_index: Tensor, batch: Tensor, skinned: Tensor,
                joint_positions: Tensor, body_codes: Tensor, frame_rotation: Tensor,
-               frame_origin: Tensor, gate: Tensor | None = None) -> Tensor:
+               frame_origin: Tensor, gate: Tensor | None) -> Tensor:
         r""":math:`M_d`: adds the detail correction to ``skinned`` ``(F, N, 3)``,
         given per garment and frame the joint positions ``(G, F, J, 3)``, body
         codes ``(G, F, C)`` and canonical frames ``(G, F, 3, 3)``, ``(G, F, 3)``,
@@ -307,7 +311,8 @@ class SwinGarEstimator(nn.Module):
         edge_index, features, shape_code = self.encode_garment(data)
         motion = self.motion_codes(data.pose_history, data.history_mask)
         batch = batch_vector(data)
-        terms = [self.skinning_terms(data, edge_index, features, shape_code, motion[:, k])
+        gate = self.clearance_gate(data.fit)
+        terms = [self.skinning_terms(data, edge_index, features, shape_code, motion[:, k], gate)
                  for k in range(TARGET_FRAMES)]
         blend = torch.stack([offsets for _, offsets in terms])
         skinned = torch.stack([
@@ -317,8 +322,7 @@ class SwinGarEstimator(nn.Module):
             return EstimatorOutput(skinned, skinned, blend)
         codes = self.body_codes(data.body_shape, data.pose_history)
         vertices = self.refine(edge_index, batch, skinned, data.joint_positions, codes,
-                               data.frame_rotation, data.frame_origin,
-                               self.clearance_gate(data.fit))
+                               data.frame_rotation, data.frame_origin, gate)
         return EstimatorOutput(vertices, skinned, blend)
 
 

@@ -62,14 +62,18 @@ def export_weights(checkpoint: str | Path, out: str | Path,
         raise ValueError(f"{checkpoint} was not written by `swingar fit` with a config "
                          "(its hyperparameters lack the estimator's init_args)")
     arguments = {**network["init_args"], **(settings or {})}
+    if arguments.get("clearance_scale") is None and arguments.get("contact_clearance"):
+        raise ValueError("a contact_clearance does nothing without a clearance_scale")
     data = saved.get("datamodule_hyper_parameters", {})
-    settings = {"sigma": float(data.get("sigma", DESCRIPTOR_SIGMA)),
-                "seed": int(data.get("seed", 0))}
-    estimator, _ = load_estimator(path)
-    write_weights(out, arguments, estimator.state_dict(), settings)
+    descriptor = {"sigma": float(data.get("sigma", DESCRIPTOR_SIGMA)),
+                  "seed": int(data.get("seed", 0))}
+    trained, _ = load_estimator(path)
+    exported = SwinGarEstimator(**arguments)  # its ValueError names a bad setting
+    exported.load_state_dict(trained.state_dict())
+    write_weights(out, arguments, exported.state_dict(), descriptor)
     training = {k: v for k, v in saved["hyper_parameters"].items()
                 if k != "estimator" and not k.startswith("_")}
-    return {"estimator": arguments, "data": settings, "training": training,
+    return {"estimator": arguments, "data": descriptor, "training": training,
             "datamodule": {k: v for k, v in data.items() if not k.startswith("_")},
             "step": int(saved["global_step"])}
 
