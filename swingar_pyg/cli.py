@@ -307,6 +307,10 @@ def build_parser() -> argparse.ArgumentParser:
                          help="find collisions with this neural body SDF (a checkpoint of "
                               "`swingar fit -c configs/body_sdf.yaml`) instead of the exact, "
                               "slower mesh SDF")
+    predict.add_argument("--no-clearance-gate", dest="clearance_gate", action="store_false",
+                         help="apply the learned terms to cloth lying on the body too (the "
+                              "weights' clearance gate skins it rigidly): for loose cloth "
+                              "near the body, e.g. a t-shirt")
     predict.set_defaults(run=_predict)
 
     report = commands.add_parser(
@@ -360,6 +364,8 @@ def _predict(args: argparse.Namespace) -> int:
         estimator, data_settings = load_estimator(args.ckpt)
     else:
         estimator, data_settings = load_pretrained(args.weights or "base")
+    if not args.clearance_gate:
+        estimator.clearance_scale = None
     body_sdf = load_body_sdf(args.body_sdf) if args.body_sdf else None
     summary = predict_to_folder(estimator, args.garment, args.motion, args.out,
                                 args.body_shape, args.seconds, args.preview,

@@ -316,3 +316,20 @@ def test_predict_refuses_an_unknown_format_before_loading_anything(tmp_path, cap
               '--format', 'obj', '--format', 'fbx', '--out', str(tmp_path / 'out')])
     assert "unknown export format 'fbx'" in capsys.readouterr().err
     assert not (tmp_path / 'out').exists()
+
+
+def test_predict_switches_the_clearance_gate_off_on_request(tmp_path, monkeypatch):
+    require('lightning')
+    import swingar_pyg.cli as cli
+
+    used = []
+
+    def recorded(estimator, *args, **kwargs):
+        used.append(estimator.clearance_scale)
+        raise SystemExit(0)
+
+    monkeypatch.setattr(cli, 'predict_to_folder', recorded)
+    for options in ([], ['--no-clearance-gate']):
+        with pytest.raises(SystemExit):
+            cli.main(['predict', '--garment', 'tshirt_loose', '--out', str(tmp_path), *options])
+    assert used[0] is not None and used[1] is None  # the shipped weights carry a gate
