@@ -321,6 +321,11 @@ def build_parser() -> argparse.ArgumentParser:
                         help="train and measure these seeds of every model trained from "
                              "configs instead of the config's (e.g. --seeds 0: one run per "
                              "ablation)")
+    report.add_argument("--train-only", action="store_true",
+                        help="train the runs the models need (resuming cut-off ones) and "
+                             "measure nothing; a later report reuses them. Without the test "
+                             "split in memory, seeds can train side by side (--seeds 1, "
+                             "--seeds 2)")
     report.set_defaults(run=_report)
 
     ship = commands.add_parser(
@@ -351,7 +356,8 @@ def build_parser() -> argparse.ArgumentParser:
         "quickstart", help="the main job: make the quickstart data, train the estimator, and "
                            "report its error and time against rigid skinning and the "
                            "simulator (swingar report -c configs/report/quickstart.yaml)")
-    quickstart.set_defaults(run=_report, config="configs/report/quickstart.yaml", seeds=None)
+    quickstart.set_defaults(run=_report, config="configs/report/quickstart.yaml", seeds=None,
+                            train_only=False)
     return parser
 
 
@@ -402,11 +408,15 @@ def _ship_weights(args: argparse.Namespace) -> int:
 
 
 def _report(args: argparse.Namespace) -> int:
-    from swingar_pyg.eval.report import ReportConfig, run_report
+    from swingar_pyg.eval.report import ReportConfig, run_report, train_runs
 
     config = ReportConfig.from_yaml(args.config)
     if args.seeds is not None:
         config = config.with_seeds(tuple(args.seeds))
+    if args.train_only:
+        for checkpoint in train_runs(config):
+            print(checkpoint)
+        return 0
     path = run_report(config)
     text = path.read_text()
     section = text.split("## Error against run time", 1)[1].split("\n## ", 1)[0]

@@ -230,3 +230,32 @@ def test_report_configs_parse_and_bad_ones_are_refused(tmp_path):
     bad.write_text('name: x\noutput: y\nmodels: []\n')
     with pytest.raises(ValueError, match="needs 'dataset'"):
         ReportConfig.from_yaml(bad)
+
+
+def test_train_only_trains_every_run_and_measures_nothing(monkeypatch, capsys):
+    require('lightning')
+    import swingar_pyg.eval.report as report
+    from swingar_pyg.cli import main
+
+    trained = []
+
+    def ensure(configs, seed, train_missing):
+        trained.append((configs, seed, train_missing))
+        return f'{configs[-1]}@{seed}.ckpt'
+
+    def no_test_split(*args, **kwargs):
+        raise AssertionError('--train-only loaded a test split')
+
+    monkeypatch.setattr(report, 'ensure_checkpoint', ensure)
+    monkeypatch.setattr(report, 'load_test_sequences', no_test_split)
+    assert main(['report', '-c', 'configs/report/ablations_base.yaml', '--seeds', '1', '2',
+                 '--train-only']) == 0
+    config = report.ReportConfig.from_yaml('configs/report/ablations_base.yaml')
+    expected = [(m.configs, seed, True) for m in config.models for seed in (1, 2)]
+    assert trained == expected and len(expected) == 14
+    printed = capsys.readouterr().out.split()
+    assert [line for line in printed if line.endswith('.ckpt')] == [
+        f'{configs[-1]}@{seed}.ckpt' for configs, seed, _ in expected]
+    trained.clear()  # a model measured from weights trains nothing
+    assert report.train_runs(report.ReportConfig.from_yaml('configs/report/base.yaml'),
+                             log=lambda _: None) == [] and trained == []

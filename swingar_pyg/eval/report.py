@@ -260,6 +260,21 @@ def _test_split(dataset: str) -> Path:
     return path
 
 
+def train_runs(config: ReportConfig, log=print) -> list[str]:
+    """Trains every run the config's models need, resuming those cut off, and
+    measures nothing; returns their best checkpoints. A report's training runs
+    for hours; without the test split held beside it, several seeds can train
+    side by side, and :func:`run_report` then reuses the finished runs."""
+    checkpoints = []
+    for model in config.models:
+        if model.weights is not None:
+            continue
+        for seed in model.seeds:
+            log(f"training: {model.name}, seed {seed}")
+            checkpoints.append(ensure_checkpoint(model.configs, seed, train_missing=True))
+    return checkpoints
+
+
 def run_report(config: ReportConfig, progress: bool = True, log=print) -> Path:
     """Measures everything the config asks for and writes the report folder;
     returns the path of ``report.md``."""
