@@ -185,6 +185,8 @@ def test_report_configs_parse_and_bad_ones_are_refused(tmp_path):
         folders = [_run_folder(m.configs, seed)[0] for m in config.models for seed in m.seeds
                    if m.weights is None]
         assert len(set(folders)) == len(folders), name  # no two runs share a folder
+        if config.archive:  # nor an archived weights file
+            assert len({f.name for f in folders}) == len(folders), name
         assert all(Path(c).is_file() for m in config.models for c in m.configs)
     ablations = ReportConfig.from_yaml('configs/report/ablations.yaml')
     assert ablations.stability == 'off' and len(ablations.models) == 7
@@ -234,6 +236,8 @@ def test_report_configs_parse_and_bad_ones_are_refused(tmp_path):
 
 def test_train_only_trains_every_run_and_measures_nothing(monkeypatch, capsys):
     require('lightning')
+    from dataclasses import replace
+
     import swingar_pyg.eval.report as report
     from swingar_pyg.cli import main
 
@@ -243,10 +247,15 @@ def test_train_only_trains_every_run_and_measures_nothing(monkeypatch, capsys):
         trained.append((configs, seed, train_missing))
         return f'{configs[-1]}@{seed}.ckpt'
 
+    def archived(configs, seed, train_missing, archive):
+        assert archive == 'benchmarks/results/ablations_base'
+        return Path(ensure(configs, seed, train_missing)).with_suffix('.pt')
+
     def no_test_split(*args, **kwargs):
         raise AssertionError('--train-only loaded a test split')
 
     monkeypatch.setattr(report, 'ensure_checkpoint', ensure)
+    monkeypatch.setattr(report, 'archived_run', archived)
     monkeypatch.setattr(report, 'load_test_sequences', no_test_split)
     assert main(['report', '-c', 'configs/report/ablations_base.yaml', '--seeds', '1', '2',
                  '--train-only']) == 0
@@ -254,8 +263,90 @@ def test_train_only_trains_every_run_and_measures_nothing(monkeypatch, capsys):
     expected = [(m.configs, seed, True) for m in config.models for seed in (1, 2)]
     assert trained == expected and len(expected) == 14
     printed = capsys.readouterr().out.split()
-    assert [line for line in printed if line.endswith('.ckpt')] == [
-        f'{configs[-1]}@{seed}.ckpt' for configs, seed, _ in expected]
+    assert [line for line in printed if line.endswith('.pt')] == [
+        f'{configs[-1]}@{seed}.pt' for configs, seed, _ in expected]
+    trained.clear()  # without an archive, the checkpoints themselves
+    assert report.train_runs(replace(config.with_seeds((0,)), archive=None),
+                             log=lambda _: None) == [
+        f'{configs[-1]}@0.ckpt' for configs, _, _ in expected[::2]]
     trained.clear()  # a model measured from weights trains nothing
     assert report.train_runs(report.ReportConfig.from_yaml('configs/report/base.yaml'),
                              log=lambda _: None) == [] and trained == []
+
+
+def test_an_archived_run_is_exported_once_and_measured_as_trained(tiny_checkpoint, tmp_path,
+                                                                   monkeypatch):
+    require('lightning')
+    import swingar_pyg.eval.report as report
+    from swingar_pyg.training import load_estimator
+
+    config = tmp_path / 'run.yaml'
+    config.write_text(f'trainer: {{default_root_dir: {tmp_path / "runs" / "small"}, '
+                      'max_steps: 2}  # a comment\n')
+    trained = []
+
+    def ensure(configs, seed, train_missing):
+        trained.append(seed)
+        return str(tiny_checkpoint)
+
+    monkeypatch.setattr(report, 'ensure_checkpoint', ensure)
+    archive = tmp_path / 'archive'
+    spec = report.ModelSpec('small', (str(config),), (0, 1))
+    estimator, data, source = spec.load(1, True, str(archive))
+    assert trained == [1] and source.startswith(f'weights {archive / "small-seed1.pt"}')
+    record = json.loads((archive / 'small-seed1.json').read_text())
+    assert record['seed'] == 1 and record['configs'] == [str(config)]
+    reference, reference_data = load_estimator(tiny_checkpoint)
+    assert data == {'sigma': reference_data.get('sigma', data['sigma']),
+                    'seed': reference_data.get('seed', 0)}
+    for name, value in reference.state_dict().items():
+        assert torch.equal(estimator.state_dict()[name], value), name
+    # measured again from the archive, never trained again; comments do not count
+    config.write_text(config.read_text().replace('# a comment', ''))
+    spec.load(1, False, str(archive))
+    assert trained == [1]
+    assert sorted(p.name for p in archive.iterdir()) == ['small-seed1.json', 'small-seed1.pt']
+    # a weights file without its record was cut off while exporting: exported again
+    (archive / 'small-seed1.json').unlink()
+    spec.load(1, True, str(archive))
+    assert trained == [1, 1]
+    # other settings than the archived run's are refused, naming what to delete
+    config.write_text(config.read_text().replace('max_steps: 2', 'max_steps: 3'))
+    with pytest.raises(ValueError, match='small-seed1.pt was trained from other settings'):
+        spec.load(1, False, str(archive))
+
+
+def test_seed_rows_give_each_model_a_confidence_interval_per_family():
+    from types import SimpleNamespace
+
+    from scipy import stats
+
+    from swingar_pyg.eval.error_vs_time import MethodResult
+    from swingar_pyg.eval.report_writer import _seed_table, seed_interval, seed_rows
+
+    values = [31.0, 33.5, 32.0]
+    mean, half = seed_interval(values)
+    low, high = stats.t.interval(0.95, 2, loc=np.mean(values), scale=stats.sem(values))
+    assert mean == pytest.approx(np.mean(values)) and half == pytest.approx((high - low) / 2)
+    assert seed_interval([4.0]) == (4.0, None)
+    sequences = [SimpleNamespace(id='a', garment=SimpleNamespace(name='skirt-1@shape0')),
+                 SimpleNamespace(id='b', garment=SimpleNamespace(name='dress-2@shape1'))]
+
+    def result(skirt, dress, seed):  # two frames of three vertices per sequence
+        return MethodResult('m', 'estimator', {'a': torch.full((2, 3), skirt),
+                                               'b': torch.full((2, 3), dress)}, [0.01],
+                            {'seed': seed})
+
+    rigid = result(20.0, 40.0, 0)
+    runs = [result(10.0, 30.0, 0), result(12.0, 26.0, 1)]
+    rows = {r['family']: r for r in seed_rows({'model': runs}, rigid, sequences)}
+    assert list(rows) == ['all', 'dress', 'skirt']
+    assert rows['skirt']['mean_mm'] == pytest.approx(11.0)
+    assert rows['skirt']['ci95_mm'] == pytest.approx(stats.t.ppf(0.975, 1) * np.std(
+        [10.0, 12.0], ddof=1) / np.sqrt(2))
+    assert rows['dress']['ratio_to_rigid'] == pytest.approx(28.0 / 40.0)
+    assert rows['all']['mean_mm'] == pytest.approx(19.5)  # (20 + 19) / 2
+    assert rows['all']['ratio_to_rigid'] == pytest.approx(19.5 / 30.0)
+    assert rows['all']['ci95_ratio'] == pytest.approx(rows['all']['ci95_mm'] / 30.0)
+    table = '\n'.join(_seed_table(list(rows.values())))
+    assert '| model | 2 | 19.5 ± ' in table and '0.70 ± ' in table

@@ -9,11 +9,18 @@ missing checkpoint trained first when ``train_missing``; or a weights file, e.g.
 shipped ``base``), the precisions and collision
 passes to evaluate them with, the simulator settings to place against them, the garment
 sizes to stream, and the stability suite's size. See ``configs/report/quickstart.yaml``.
+
+With ``archive: <folder>`` each finished run of a config stack is also exported there as
+a weights file (``<run folder name>.pt``, with a JSON record of its configs, seed and step)
+and measured from it; a run with an archived file is never trained again, so a report of
+many runs can be spread over machines that keep only the committed archive.
 """
 
 from __future__ import annotations
 
 import glob
+import hashlib
+import json
 import platform
 import time
 from dataclasses import dataclass, field, replace
@@ -22,6 +29,7 @@ from pathlib import Path
 
 import torch
 
+from swingar_pyg.atomic import atomic_path
 from swingar_pyg.collision import NeuralCollisions
 from swingar_pyg.eval.error_vs_time import (
     MethodResult,
@@ -38,7 +46,7 @@ from swingar_pyg.eval.stream_speed import stream_speed
 from swingar_pyg.geometry.spectral import DESCRIPTOR_SIGMA
 from swingar_pyg.models import SwinGarEstimator
 from swingar_pyg.models.pretrained import weights_path, weights_sha256
-from swingar_pyg.training import load_body_sdf, load_estimator, load_pretrained
+from swingar_pyg.training import export_weights, load_body_sdf, load_estimator, load_pretrained
 from swingar_pyg.training.cli import build_cli
 from swingar_pyg.world.body import AnnyBody
 from swingar_pyg.world.dataset import DatasetConfig, make_dataset
@@ -77,11 +85,14 @@ class ModelSpec:
             raise ValueError(f"model {name!r} is measured from weights: it has no seeds")
         return cls(name, (), (0,), tuple(entry.get("collisions", ("none",))), weights)
 
-    def load(self, seed: int, train_missing: bool) -> tuple[SwinGarEstimator, dict, str]:
+    def load(self, seed: int, train_missing: bool, archive: str | None = None
+             ) -> tuple[SwinGarEstimator, dict, str]:
         """The estimator of ``seed`` in eval mode, its descriptor settings, and where
-        it came from (a checkpoint, trained first if missing, or the weights)."""
-        if self.weights is not None:
-            path = weights_path(self.weights)
+        it came from (a checkpoint, trained first if missing, its archived weights
+        when ``archive`` is given, or the model's weights)."""
+        if self.weights is not None or archive is not None:
+            path = (weights_path(self.weights) if self.weights is not None
+                    else archived_run(self.configs, seed, train_missing, archive))
             digest = weights_sha256(path)[:12]
             return *load_pretrained(path), f"weights {path} (sha256 {digest}...)"
         checkpoint = ensure_checkpoint(self.configs, seed, train_missing)
@@ -108,6 +119,7 @@ class ReportConfig:
     extra_tests: dict = field(default_factory=dict)
     test_sequences: int | None = None
     seeds_override: tuple[int, ...] | None = None
+    archive: str | None = None
 
     @classmethod
     def from_yaml(cls, path: str | Path) -> "ReportConfig":
@@ -133,7 +145,7 @@ class ReportConfig:
                 streaming_compile=bool(streaming.get("compile", cls.streaming_compile)),
                 stability=str(raw.get("stability", "full")),
                 extra_tests=dict(raw.get("extra_tests", {})),
-                test_sequences=raw.get("test_sequences"))
+                test_sequences=raw.get("test_sequences"), archive=raw.get("archive"))
         except KeyError as missing:
             raise ValueError(f"{path}: the report config needs {missing}") from None
         except (TypeError, ValueError) as error:
@@ -224,6 +236,41 @@ def ensure_checkpoint(configs: tuple[str, ...], seed: int, train_missing: bool) 
     return best
 
 
+def archived_run(configs: tuple[str, ...], seed: int, train_missing: bool,
+                 archive: str | Path) -> Path:
+    """The weights file of a config stack and seed in ``archive``: exported from
+    its finished run (trained first by :func:`ensure_checkpoint` when missing)
+    unless the archive holds it already, with ``<name>.json`` beside it naming
+    the configs, seed, checkpoint and step. An archived run whose configs have
+    changed since (their parsed YAML, comments aside) is refused."""
+    folder, _ = _run_folder(configs, seed)
+    path = Path(archive) / f"{folder.name}.pt"
+    record = path.with_suffix(".json")
+    digest = _configs_sha256(configs)
+    if path.is_file() and record.is_file():
+        archived = json.loads(record.read_text())
+        if archived.get("configs_sha256") != digest:
+            raise ValueError(f"{path} was trained from other settings than "
+                             f"{' + '.join(configs)} now hold; delete {path} and {record} "
+                             "to train it again")
+        return path
+    checkpoint = ensure_checkpoint(configs, seed, train_missing)
+    exported = export_weights(checkpoint, path)
+    with atomic_path(record) as tmp:  # written last: a record means a whole weights file
+        Path(tmp).write_text(json.dumps(
+            {"configs": list(configs), "seed": seed, "configs_sha256": digest,
+             "checkpoint": Path(checkpoint).name, "step": exported["step"],
+             "weights_sha256": weights_sha256(path)}, indent=1) + "\n")
+    return path
+
+
+def _configs_sha256(configs: tuple[str, ...]) -> str:
+    import yaml
+
+    parsed = [yaml.safe_load(Path(path).read_text()) for path in configs]
+    return hashlib.sha256(json.dumps(parsed, sort_keys=True).encode()).hexdigest()
+
+
 def _finished(last: Path, configs: tuple[str, ...]) -> bool:
     """Whether the run of ``last.ckpt`` reached the configs' ``max_steps``."""
     import yaml
@@ -262,17 +309,21 @@ def _test_split(dataset: str) -> Path:
 
 def train_runs(config: ReportConfig, log=print) -> list[str]:
     """Trains every run the config's models need, resuming those cut off, and
-    measures nothing; returns their best checkpoints. A report's training runs
-    for hours; without the test split held beside it, several seeds can train
-    side by side, and :func:`run_report` then reuses the finished runs."""
-    checkpoints = []
+    measures nothing; returns their best checkpoints (their weights files when
+    the config has an ``archive``). A report's training runs for hours; without
+    the test split held beside it, several seeds can train side by side, and
+    :func:`run_report` then reuses the finished runs."""
+    trained = []
     for model in config.models:
         if model.weights is not None:
             continue
         for seed in model.seeds:
             log(f"training: {model.name}, seed {seed}")
-            checkpoints.append(ensure_checkpoint(model.configs, seed, train_missing=True))
-    return checkpoints
+            if config.archive is None:
+                trained.append(ensure_checkpoint(model.configs, seed, train_missing=True))
+            else:
+                trained.append(str(archived_run(model.configs, seed, True, config.archive)))
+    return trained
 
 
 def run_report(config: ReportConfig, progress: bool = True, log=print) -> Path:
@@ -298,7 +349,7 @@ def run_report(config: ReportConfig, progress: bool = True, log=print) -> Path:
     results, checkpoints, per_model, first_seeds = [], {}, {}, {}
     for model in config.models:
         for seed in model.seeds:
-            estimator, data, source = model.load(seed, config.train_missing)
+            estimator, data, source = model.load(seed, config.train_missing, config.archive)
             checkpoints[f"{model.name} (seed {seed})"] = source
             if seed == model.seeds[0]:
                 first_seeds[model.name] = estimator, data

@@ -69,6 +69,61 @@ def _family(s) -> str:
     return garment_family(s.garment.name)
 
 
+def seed_interval(values: list[float], level: float = 0.95) -> tuple[float, float | None]:
+    """The mean of one figure over ``n`` seeds and the half-width of its
+    Student-t confidence interval, ``t_{(1+level)/2, n-1} · s / sqrt(n)`` with
+    ``s`` the sample standard deviation; ``None`` for a single seed."""
+    from scipy.stats import t
+
+    values = np.asarray(values, dtype=float)
+    if len(values) < 2:
+        return float(values.mean()), None
+    half = t.ppf((1 + level) / 2, len(values) - 1) * values.std(ddof=1) / np.sqrt(len(values))
+    return float(values.mean()), float(half)
+
+
+def seed_rows(per_model, rigid, sequences) -> list[dict]:
+    """Per model and garment family (``all`` first): the seeds' mean vertex error
+    (mm) and its ratio to rigid skinning, each with its 95 % confidence interval."""
+    families = ["all"] + sorted({_family(s) for s in sequences})
+    reference = {"all": float(torch.cat([e.reshape(-1) for e in rigid.errors.values()]).mean())}
+    reference.update({k: float(v.mean()) for k, v in _groups(rigid, sequences, _family).items()})
+    rows = []
+    for label, runs in per_model.items():
+        for family in families:
+            means = [float((torch.cat([e.reshape(-1) for e in r.errors.values()])
+                            if family == "all" else _groups(r, sequences, _family)[family])
+                           .mean()) for r in runs]
+            mean, half = seed_interval(means)
+            rows.append({"method": label, "family": family, "seeds": len(runs),
+                         "mean_mm": mean, "ci95_mm": half,
+                         "ratio_to_rigid": mean / reference[family],
+                         "ci95_ratio": None if half is None else half / reference[family]})
+    return rows
+
+
+def _seed_table(rows: list[dict]) -> list[str]:
+    families = list(dict.fromkeys(r["family"] for r in rows))
+    lines = ["## Over seeds", "",
+             "Mean vertex error (mm) and its ratio to rigid skinning, averaged over the seeds, "
+             "± the half-width of the 95 % Student-t confidence interval over seeds "
+             "(`seeds.csv`).", "",
+             "| method | seeds | " + " | ".join(families) + " |",
+             "|---|---|" + "---|" * len(families)]
+    for method in dict.fromkeys(r["method"] for r in rows):
+        mine = {r["family"]: r for r in rows if r["method"] == method}
+        cells = []
+        for family in families:
+            r = mine[family]
+            if r["ci95_mm"] is None:
+                cells.append(f"{r['mean_mm']:.1f} mm, {r['ratio_to_rigid']:.2f}x")
+            else:
+                cells.append(f"{r['mean_mm']:.1f} ± {r['ci95_mm']:.1f} mm, "
+                             f"{r['ratio_to_rigid']:.2f} ± {r['ci95_ratio']:.2f}x")
+        lines.append(f"| {method} | {mine['all']['seeds']} | " + " | ".join(cells) + " |")
+    return lines + [""]
+
+
 def plot_error_vs_time(results, rigid, simulator, second, floor, simulated):
     """Every method on the sequences the simulator re-ran, so the points compare; the
     simulator's settings as points, joined along its Pareto front (what the equal-error
@@ -198,6 +253,9 @@ def write_report(out: Path, config, *, machine, test_path, sequences, results, p
     _write_csv(out / "per_motion.csv", [r for r in garment_rows if "motion" in r])
     _write_csv(out / "streaming.csv", streaming)
     _write_csv(out / "stability.csv", as_dicts(stability))
+    seeds = seed_rows(per_model, rigid, sequences)
+    if any(r["seeds"] > 1 for r in seeds):
+        _write_csv(out / "seeds.csv", seeds)
     _save(plot_error_vs_time(results, rigid, simulator, second, floor, simulated),
           out / "error_vs_time.png")
     _save(plot_per_garment(per_model, rigid, sequences), out / "per_garment.png")
@@ -311,6 +369,8 @@ def write_report(out: Path, config, *, machine, test_path, sequences, results, p
     lines += ["", "Mean vertex error in mm (± the standard deviation over seeds where there are "
               "several). Per-vertex error distributions:", "",
               "![distributions](distributions.png)", ""]
+    if any(r["seeds"] > 1 for r in seeds):
+        lines += _seed_table(seeds)
     if streaming:
         stages = [k for k in streaming[0] if k.startswith("ms ")]
         lines += ["## Streaming speed", "", "![streaming](streaming.png)", "",
