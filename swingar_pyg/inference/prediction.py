@@ -167,7 +167,11 @@ def predict_to_folder(estimator: SwinGarEstimator, garment: str, motion: str, ou
                "motion": clip.name, "frames": int(len(vertices)), "fps": float(clip.fps),
                "exported": exported,
                "estimator_ms_per_frame": 1e3 * sum(result.stage(n).seconds for n in network) /
-               len(vertices), "checkpoint": checkpoint, "collisions": collision_counts,
+               len(vertices), "checkpoint": checkpoint,
+               "clearance_gate": None if estimator.clearance_scale is None else {
+                   "clearance_scale": estimator.clearance_scale,
+                   "contact_clearance": estimator.contact_clearance},
+               "collisions": collision_counts,
                "stages": [dataclasses.asdict(stage) for stage in result.stages]}
     with atomic_path(out / "summary.json") as tmp:
         tmp.write_text(json.dumps(summary, indent=2))
