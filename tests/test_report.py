@@ -301,6 +301,13 @@ def test_an_archived_run_is_exported_once_and_measured_as_trained(tiny_checkpoin
                     'seed': reference_data.get('seed', 0)}
     for name, value in reference.state_dict().items():
         assert torch.equal(estimator.state_dict()[name], value), name
+    # the best checkpoint's monitored figure, as Lightning's ModelCheckpoint saved it
+    monitored = tmp_path / 'monitored.ckpt'
+    torch.save({'callbacks': {"ModelCheckpoint{'monitor': 'val/estimator_mean_mm', 'mode': "
+                              "'min'}": {'best_model_score': torch.tensor(31.5)}}}, monitored)
+    assert report._best_score(monitored) == {'val/estimator_mean_mm': 31.5}
+    torch.save({'callbacks': {}}, monitored)
+    assert report._best_score(monitored) is None
     # measured again from the archive, never trained again; comments do not count
     config.write_text(config.read_text().replace('# a comment', ''))
     spec.load(1, False, str(archive))

@@ -241,7 +241,7 @@ def archived_run(configs: tuple[str, ...], seed: int, train_missing: bool,
     """The weights file of a config stack and seed in ``archive``: exported from
     its finished run (trained first by :func:`ensure_checkpoint` when missing)
     unless the archive holds it already, with ``<name>.json`` beside it naming
-    the configs, seed, checkpoint and step. An archived run whose configs have
+    the configs, seed, checkpoint, step and its monitored validation figure. An archived run whose configs have
     changed since (their parsed YAML, comments aside) is refused."""
     folder, _ = _run_folder(configs, seed)
     path = Path(archive) / f"{folder.name}.pt"
@@ -260,8 +260,20 @@ def archived_run(configs: tuple[str, ...], seed: int, train_missing: bool,
         Path(tmp).write_text(json.dumps(
             {"configs": list(configs), "seed": seed, "configs_sha256": digest,
              "checkpoint": Path(checkpoint).name, "step": exported["step"],
+             "monitored": _best_score(checkpoint),
              "weights_sha256": weights_sha256(path)}, indent=1) + "\n")
     return path
+
+
+def _best_score(checkpoint: str | Path) -> dict | None:
+    """The monitored validation figure of a best checkpoint (e.g.
+    ``{"val/estimator_mean_mm": 31.8}``), ``None`` if it was saved unmonitored."""
+    saved = torch.load(checkpoint, map_location="cpu", weights_only=False)
+    for key, state in saved.get("callbacks", {}).items():
+        score = state.get("best_model_score") if isinstance(state, dict) else None
+        if score is not None and "'monitor': '" in key:
+            return {key.split("'monitor': '", 1)[1].split("'", 1)[0]: float(score)}
+    return None
 
 
 def _configs_sha256(configs: tuple[str, ...]) -> str:
