@@ -280,9 +280,11 @@ def test_an_archived_run_is_exported_once_and_measured_as_trained(tiny_checkpoin
     import swingar_pyg.eval.report as report
     from swingar_pyg.training import load_estimator
 
+    dataset = tmp_path / 'data.yaml'
+    dataset.write_text('name: tiny\n')
     config = tmp_path / 'run.yaml'
     config.write_text(f'trainer: {{default_root_dir: {tmp_path / "runs" / "small"}, '
-                      'max_steps: 2}  # a comment\n')
+                      f'max_steps: 2}}  # a comment\ndata: {{init_args: {{config: {dataset}}}}}\n')
     trained = []
 
     def ensure(configs, seed, train_missing):
@@ -295,12 +297,27 @@ def test_an_archived_run_is_exported_once_and_measured_as_trained(tiny_checkpoin
     estimator, data, source = spec.load(1, True, str(archive))
     assert trained == [1] and source.startswith(f'weights {archive / "small-seed1.pt"}')
     record = json.loads((archive / 'small-seed1.json').read_text())
+    saved = torch.load(tiny_checkpoint, map_location='cpu', weights_only=False)
     assert record['seed'] == 1 and record['configs'] == [str(config)]
-    reference, reference_data = load_estimator(tiny_checkpoint)
-    assert data == {'sigma': reference_data.get('sigma', data['sigma']),
-                    'seed': reference_data.get('seed', 0)}
+    assert record['step'] == saved['global_step'] and record['checkpoint'] == 'last.ckpt'
+    reference, _ = load_estimator(tiny_checkpoint)
     for name, value in reference.state_dict().items():
         assert torch.equal(estimator.state_dict()[name], value), name
+    assert spec.load(0, True, str(archive))[2].startswith(f'weights {archive / "small.pt"}')
+    assert trained == [1, 0]
+    # measured again from the archive, never trained again; comments do not count
+    config.write_text(config.read_text().replace('# a comment', ''))
+    spec.load(1, False, str(archive))
+    assert trained == [1, 0]
+    assert sorted(p.name for p in archive.iterdir()) == [
+        'small-seed1.json', 'small-seed1.pt', 'small.json', 'small.pt']
+    # a weights file without its record was cut off while exporting: exported again
+    (archive / 'small-seed1.json').unlink()
+    (archive / 'small-seed1.pt').write_bytes(b'PK\x03\x04 half a file')
+    spec.load(1, True, str(archive))
+    assert trained == [1, 0, 1]
+    exported = report.load_pretrained(archive / 'small-seed1.pt')[0].state_dict()
+    assert all(torch.equal(exported[k], v) for k, v in reference.state_dict().items())
     # the best checkpoint's monitored figure, as Lightning's ModelCheckpoint saved it
     monitored = tmp_path / 'monitored.ckpt'
     torch.save({'callbacks': {"ModelCheckpoint{'monitor': 'val/estimator_mean_mm', 'mode': "
@@ -308,19 +325,26 @@ def test_an_archived_run_is_exported_once_and_measured_as_trained(tiny_checkpoin
     assert report._best_score(monitored) == {'val/estimator_mean_mm': 31.5}
     torch.save({'callbacks': {}}, monitored)
     assert report._best_score(monitored) is None
-    # measured again from the archive, never trained again; comments do not count
-    config.write_text(config.read_text().replace('# a comment', ''))
-    spec.load(1, False, str(archive))
-    assert trained == [1]
-    assert sorted(p.name for p in archive.iterdir()) == ['small-seed1.json', 'small-seed1.pt']
-    # a weights file without its record was cut off while exporting: exported again
-    (archive / 'small-seed1.json').unlink()
-    spec.load(1, True, str(archive))
-    assert trained == [1, 1]
-    # other settings than the archived run's are refused, naming what to delete
+    # refused: a weights file its record does not name, other settings (of the training
+    # configs or of the dataset config they name), another stack's run of the same name
+    weights = (archive / 'small.pt').read_bytes()
+    (archive / 'small.pt').write_bytes(weights + b'\0')
+    with pytest.raises(ValueError, match='small.pt is not the weights file'):
+        spec.load(0, False, str(archive))
+    (archive / 'small.pt').write_bytes(weights)
+    spec.load(0, False, str(archive))
+    dataset.write_text('name: other\n')
+    with pytest.raises(ValueError, match='small.pt was trained from other settings'):
+        spec.load(0, False, str(archive))
+    dataset.write_text('name: tiny\n')
     config.write_text(config.read_text().replace('max_steps: 2', 'max_steps: 3'))
     with pytest.raises(ValueError, match='small-seed1.pt was trained from other settings'):
         spec.load(1, False, str(archive))
+    twin = tmp_path / 'twin.yaml'
+    twin.write_text(config.read_text())
+    with pytest.raises(ValueError, match='give this report an archive of its own'):
+        report.ModelSpec('twin', (str(twin),)).load(0, False, str(archive))
+    assert trained == [1, 0, 1]
 
 
 def test_seed_rows_give_each_model_a_confidence_interval_per_family():

@@ -241,18 +241,29 @@ def archived_run(configs: tuple[str, ...], seed: int, train_missing: bool,
     """The weights file of a config stack and seed in ``archive``: exported from
     its finished run (trained first by :func:`ensure_checkpoint` when missing)
     unless the archive holds it already, with ``<name>.json`` beside it naming
-    the configs, seed, checkpoint, step and its monitored validation figure. An archived run whose configs have
-    changed since (their parsed YAML, comments aside) is refused."""
+    the configs, seed, checkpoint, step and its monitored validation figure.
+
+    An archived run is refused when its configs, or the dataset config they
+    name, have changed since (their parsed YAML: comments aside), when it is
+    another config stack's run of the same folder name, or when its weights
+    file is not the one its record names."""
     folder, _ = _run_folder(configs, seed)
     path = Path(archive) / f"{folder.name}.pt"
     record = path.with_suffix(".json")
     digest = _configs_sha256(configs)
     if path.is_file() and record.is_file():
         archived = json.loads(record.read_text())
+        if archived.get("configs") != list(configs):
+            raise ValueError(f"{path} holds the run of {' + '.join(archived.get('configs', []))}"
+                             f", not of {' + '.join(configs)}: give this report an archive "
+                             "of its own")
         if archived.get("configs_sha256") != digest:
             raise ValueError(f"{path} was trained from other settings than "
-                             f"{' + '.join(configs)} now hold; delete {path} and {record} "
-                             "to train it again")
+                             f"{' + '.join(configs)} and their dataset config now hold; "
+                             f"delete {path} and {record} to train it again")
+        if archived.get("weights_sha256") != weights_sha256(path):
+            raise ValueError(f"{path} is not the weights file {record} names (its sha256 "
+                             "differs); restore it or delete both to export it again")
         return path
     checkpoint = ensure_checkpoint(configs, seed, train_missing)
     exported = export_weights(checkpoint, path)
@@ -277,9 +288,16 @@ def _best_score(checkpoint: str | Path) -> dict | None:
 
 
 def _configs_sha256(configs: tuple[str, ...]) -> str:
+    """sha256 of a config stack's parsed YAML and of the dataset config it
+    trains on (``data.init_args.config``, the last one named)."""
     import yaml
 
-    parsed = [yaml.safe_load(Path(path).read_text()) for path in configs]
+    parsed = [yaml.safe_load(Path(path).read_text()) or {} for path in configs]
+    dataset = None
+    for config in parsed:
+        dataset = ((config.get("data") or {}).get("init_args") or {}).get("config", dataset)
+    if dataset is not None:
+        parsed.append(yaml.safe_load(Path(dataset).read_text()))
     return hashlib.sha256(json.dumps(parsed, sort_keys=True).encode()).hexdigest()
 
 

@@ -85,16 +85,19 @@ def seed_interval(values: list[float], level: float = 0.95) -> tuple[float, floa
 def seed_rows(per_model, rigid, sequences) -> list[dict]:
     """Per model and garment family (``all`` first): the seeds' mean vertex error
     (mm) and its ratio to rigid skinning, each with its 95 % confidence interval."""
-    families = ["all"] + sorted({_family(s) for s in sequences})
-    reference = {"all": float(torch.cat([e.reshape(-1) for e in rigid.errors.values()]).mean())}
-    reference.update({k: float(v.mean()) for k, v in _groups(rigid, sequences, _family).items()})
+
+    def family_means(result) -> dict[str, float]:
+        means = {k: float(v.mean()) for k, v in _groups(result, sequences, _family).items()}
+        means["all"] = float(torch.cat([e.reshape(-1) for e in result.errors.values()]).mean())
+        return means
+
+    reference = family_means(rigid)
+    families = ["all"] + sorted(k for k in reference if k != "all")
     rows = []
     for label, runs in per_model.items():
+        per_run = [family_means(run) for run in runs]
         for family in families:
-            means = [float((torch.cat([e.reshape(-1) for e in r.errors.values()])
-                            if family == "all" else _groups(r, sequences, _family)[family])
-                           .mean()) for r in runs]
-            mean, half = seed_interval(means)
+            mean, half = seed_interval([means[family] for means in per_run])
             rows.append({"method": label, "family": family, "seeds": len(runs),
                          "mean_mm": mean, "ci95_mm": half,
                          "ratio_to_rigid": mean / reference[family],
@@ -253,9 +256,12 @@ def write_report(out: Path, config, *, machine, test_path, sequences, results, p
     _write_csv(out / "per_motion.csv", [r for r in garment_rows if "motion" in r])
     _write_csv(out / "streaming.csv", streaming)
     _write_csv(out / "stability.csv", as_dicts(stability))
-    seeds = seed_rows(per_model, rigid, sequences)
-    if any(r["seeds"] > 1 for r in seeds):
-        _write_csv(out / "seeds.csv", seeds)
+    over_seeds = seed_rows(per_model, rigid, sequences)
+    several_seeds = any(r["seeds"] > 1 for r in over_seeds)
+    if several_seeds:
+        _write_csv(out / "seeds.csv", over_seeds)
+    else:  # not a table of an earlier report into this folder
+        (out / "seeds.csv").unlink(missing_ok=True)
     _save(plot_error_vs_time(results, rigid, simulator, second, floor, simulated),
           out / "error_vs_time.png")
     _save(plot_per_garment(per_model, rigid, sequences), out / "per_garment.png")
@@ -369,8 +375,8 @@ def write_report(out: Path, config, *, machine, test_path, sequences, results, p
     lines += ["", "Mean vertex error in mm (± the standard deviation over seeds where there are "
               "several). Per-vertex error distributions:", "",
               "![distributions](distributions.png)", ""]
-    if any(r["seeds"] > 1 for r in seeds):
-        lines += _seed_table(seeds)
+    if several_seeds:
+        lines += _seed_table(over_seeds)
     if streaming:
         stages = [k for k in streaming[0] if k.startswith("ms ")]
         lines += ["## Streaming speed", "", "![streaming](streaming.png)", "",
@@ -403,6 +409,6 @@ def write_report(out: Path, config, *, machine, test_path, sequences, results, p
                "models": [m.__dict__ for m in config.models], "machine": machine,
                "test_split": str(test_path), "checkpoints": checkpoints, "body_sdf": body_sdf,
                "results": rows, "speedups": speedups, "streaming": streaming, "extra": extra,
-               "stability": as_dicts(stability), "seconds": seconds}
+               "stability": as_dicts(stability), "over_seeds": over_seeds, "seconds": seconds}
     _write_text(out / "report.json", json.dumps(payload, indent=2, default=str))
     return report
