@@ -51,10 +51,18 @@ def sdf_config_of(tiny_body_sdf):
     return tiny_body_sdf.parents[1] / 'tiny_sdf.yaml'
 
 
+def _live(kind) -> int:
+    import gc
+
+    gc.collect()
+    return sum(type(o) is kind for o in gc.get_objects())
+
+
 def test_report_measures_every_method_on_the_same_sequences(tiny_windows, tiny_body_sdf,
                                                             tmp_path):
     import h5py
 
+    from datamodules import SwinGarDataModule
     from swingar_pyg.eval.report import ReportConfig, run_report
 
     (tmp_path / 'training.yaml').write_text(TINY_TRAINING.format(
@@ -72,7 +80,10 @@ def test_report_measures_every_method_on_the_same_sequences(tiny_windows, tiny_b
                                               body_sdf=sdf_stack,
                                               second=', second: [2, 2]' if has_newton else ''))
     config = ReportConfig.from_yaml(report_yaml)
+    datamodules = _live(SwinGarDataModule)
     report = run_report(config, progress=False, log=lambda *_: None)
+    # the estimator was trained in a process of its own: its data did not stay in this one
+    assert _live(SwinGarDataModule) == datamodules
     text = report.read_text()
     for heading in ('## Error against run time', '## Per garment family, garment and motion',
                     '## Streaming speed', '## Reproduce'):
@@ -381,3 +392,14 @@ def test_seed_rows_give_each_model_a_confidence_interval_per_family():
     assert rows['all']['ci95_ratio'] == pytest.approx(rows['all']['ci95_mm'] / 30.0)
     table = '\n'.join(_seed_table(list(rows.values())))
     assert '| model | 2 | 19.5 ± ' in table and '0.70 ± ' in table
+
+
+def test_a_failed_training_run_is_reported_with_its_command(tmp_path):
+    require('lightning')
+    from swingar_pyg.eval.report import ensure_checkpoint
+
+    config = tmp_path / 'broken.yaml'
+    config.write_text(f'trainer: {{default_root_dir: {tmp_path / "run"}, max_steps: 2}}\n'
+                      f'data: {{init_args: {{config: {tmp_path / "missing.yaml"}}}}}\n')
+    with pytest.raises(RuntimeError, match=r'training under .*run failed \(exit code 1'):
+        ensure_checkpoint(('configs/quickstart.yaml', str(config)), 0, True)

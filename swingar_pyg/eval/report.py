@@ -21,6 +21,7 @@ from __future__ import annotations
 import glob
 import hashlib
 import json
+import multiprocessing
 import platform
 import time
 from dataclasses import dataclass, field, replace
@@ -227,13 +228,25 @@ def ensure_checkpoint(configs: tuple[str, ...], seed: int, train_missing: bool) 
     if not train_missing:
         raise ValueError(f"no finished run under {folder}; train it with `swingar fit "
                          f"{' '.join(arguments)}` or set train_missing")
-    cli = build_cli(arguments, run=False)
-    cli.trainer.fit(cli.model, datamodule=cli.datamodule,
-                    ckpt_path=str(last) if last.exists() else None)
+    # In a process of its own: a finished fit leaves its datamodule (the split in memory,
+    # ~8 GB for the base data) referenced, so runs trained one after another in one
+    # process would add up.
+    process = multiprocessing.get_context("spawn").Process(
+        target=_fit, args=(arguments, str(last) if last.exists() else None))
+    process.start()
+    process.join()
+    if process.exitcode != 0:
+        raise RuntimeError(f"training under {folder} failed (exit code {process.exitcode}; "
+                           f"its error is printed above): swingar fit {' '.join(arguments)}")
     best = _best_checkpoint(folder)
     if best is None:
         raise ValueError(f"training under {folder} wrote no best checkpoint")
     return best
+
+
+def _fit(arguments: list[str], resume: str | None) -> None:
+    cli = build_cli(arguments, run=False)
+    cli.trainer.fit(cli.model, datamodule=cli.datamodule, ckpt_path=resume)
 
 
 def archived_run(configs: tuple[str, ...], seed: int, train_missing: bool,
