@@ -193,15 +193,30 @@ def _stack(configs) -> tuple[str, ...] | None:
 
 # ------------------------------------------------------------------ checkpoints
 
+def _parsed(configs: tuple[str, ...]) -> list[dict]:
+    """Each YAML file of a config stack, parsed (an empty file as ``{}``)."""
+    import yaml
+
+    return [yaml.safe_load(Path(path).read_text()) or {} for path in configs]
+
+
+def _last_set(parsed: list[dict], *keys: str):
+    """The value at ``keys`` (e.g. ``"trainer", "max_steps"``) of the last
+    config in a parsed stack that sets it, as the CLI layers them; ``None`` if
+    none does."""
+    value = None
+    for config in parsed:
+        node = config
+        for key in keys[:-1]:
+            node = node.get(key) or {}
+        value = node.get(keys[-1], value)
+    return value
+
+
 def _run_folder(configs: tuple[str, ...], seed: int) -> tuple[Path, list[str]]:
     """The run folder of a training config stack at ``seed``, and the CLI
     arguments that train it there."""
-    import yaml
-
-    root = None
-    for path in configs:
-        trainer = (yaml.safe_load(Path(path).read_text()) or {}).get("trainer") or {}
-        root = trainer.get("default_root_dir", root)
+    root = _last_set(_parsed(configs), "trainer", "default_root_dir")
     if root is None:
         raise ValueError(f"{' + '.join(configs)} names no trainer.default_root_dir")
     folder = Path(root) if seed == 0 else Path(f"{root}-seed{seed}")
@@ -303,25 +318,16 @@ def _best_score(checkpoint: str | Path) -> dict | None:
 def _configs_sha256(configs: tuple[str, ...]) -> str:
     """sha256 of a config stack's parsed YAML and of the dataset config it
     trains on (``data.init_args.config``, the last one named)."""
-    import yaml
-
-    parsed = [yaml.safe_load(Path(path).read_text()) or {} for path in configs]
-    dataset = None
-    for config in parsed:
-        dataset = ((config.get("data") or {}).get("init_args") or {}).get("config", dataset)
+    parsed = _parsed(configs)
+    dataset = _last_set(parsed, "data", "init_args", "config")
     if dataset is not None:
-        parsed.append(yaml.safe_load(Path(dataset).read_text()))
+        parsed += _parsed((dataset,))
     return hashlib.sha256(json.dumps(parsed, sort_keys=True).encode()).hexdigest()
 
 
 def _finished(last: Path, configs: tuple[str, ...]) -> bool:
     """Whether the run of ``last.ckpt`` reached the configs' ``max_steps``."""
-    import yaml
-
-    steps = None
-    for path in configs:
-        trainer = (yaml.safe_load(Path(path).read_text()) or {}).get("trainer") or {}
-        steps = trainer.get("max_steps", steps)
+    steps = _last_set(_parsed(configs), "trainer", "max_steps")
     saved = torch.load(last, map_location="cpu", weights_only=False)
     return steps is None or steps < 0 or saved.get("global_step", 0) >= steps
 
