@@ -27,7 +27,7 @@ import torch
 from common import clearance_gate, machine_info, write_results
 
 from swingar_pyg.eval.error_vs_time import load_test_sequences
-from swingar_pyg.eval.model_card import labelled_configs, made_test_split, measure
+from swingar_pyg.eval.model_card import labelled_configs, made_split, measure
 from swingar_pyg.training import load_pretrained
 from swingar_pyg.world.body import AnnyBody
 
@@ -53,12 +53,12 @@ def switched_off(estimator: torch.nn.Module, heads: tuple[str, ...]) -> torch.nn
     return variant
 
 
-def split_sequences(config_path: str, body, stride: int) -> list:
-    """Every ``stride``-th test sequence of a dataset config (made beforehand by
+def split_sequences(config_path: str, body, stride: int, split: str = "test") -> list:
+    """Every ``stride``-th sequence of a split of a dataset config (made beforehand by
     ``make-dataset``), in the order of their ids."""
     import h5py
 
-    _, path = made_test_split(config_path)
+    _, path = made_split(config_path, split)
     with h5py.File(path, "r") as file:
         ids = sorted(file["sequences"])[::stride]
     return load_test_sequences(path, body, ids=ids)

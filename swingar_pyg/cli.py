@@ -332,7 +332,12 @@ def build_parser() -> argparse.ArgumentParser:
         "ship-weights", help="export a checkpoint as weights inside the package "
                              "(swingar_pyg/weights/NAME.pt) and measure its model card "
                              "(NAME.json, NAME.md) on a test split and a check slice")
-    ship.add_argument("--ckpt", required=True, help="a checkpoint of `swingar fit`")
+    shipped = ship.add_mutually_exclusive_group(required=True)
+    shipped.add_argument("--ckpt", help="a checkpoint of `swingar fit`")
+    shipped.add_argument("--weights", metavar="NAME|PT",
+                         help="shipped weights by name or a `swingar ship-weights` .pt file "
+                              "with its card beside it, exported again (e.g. with another "
+                              "--clearance-scale); the card's training provenance carries over")
     ship.add_argument("--name", required=True,
                       help="the weights' name: NAME.pt, NAME.json and NAME.md (the package "
                            "ships `base`; writing it replaces the shipped model)")
@@ -401,7 +406,7 @@ def _ship_weights(args: argparse.Namespace) -> int:
                                               ("contact_clearance", args.contact_clearance))
                 if value is not None}
     card = ship_weights(args.ckpt, args.name, args.data, extra, args.training_command,
-                        args.out_dir or WEIGHTS_DIR, settings=settings)
+                        args.out_dir or WEIGHTS_DIR, settings=settings, weights=args.weights)
     print(card.with_suffix(".md").read_text())
     print(f"wrote {card.with_suffix('.pt')}, {card} and {card.with_suffix('.md')}")
     return 0

@@ -1,9 +1,11 @@
 """Weights files and `swingar ship-weights` (export and model card)."""
 import json
+import shutil
 from pathlib import Path
 
 import pytest
 import torch
+import yaml
 
 from tests.extras import require
 from tests.windows import SMALL_ESTIMATOR
@@ -110,6 +112,21 @@ def test_ship_weights_writes_weights_and_a_card_that_re_measures(tiny_checkpoint
     assert f"{test['all']['estimator_mean_mm']:.1f}" in markdown
     assert 'Set on the trained network at export' in markdown
 
+    # the gate set anew on the shipped weights, without the checkpoint
+    again_dir = tmp_path / 'regated'
+    regated_path = ship_weights(None, 'tiny', tiny_windows.hparams.config, out_dir=again_dir,
+                                check_slice=TINY_CHECK_SLICE, progress=False,
+                                settings={'clearance_scale': 0.05}, weights=tmp_path / 'tiny.pt')
+    regated_card = json.loads(regated_path.read_text())
+    regated, _ = load_pretrained(again_dir / 'tiny.pt')
+    for name, value in trained.state_dict().items():
+        assert torch.equal(regated.state_dict()[name], value), name
+    assert (regated.clearance_scale, regated.contact_clearance) == (0.05, 0.006)
+    assert regated_card['set_at_export'] == {'clearance_scale': 0.05, 'contact_clearance': 0.006}
+    assert regated_card['training'] == card['training']  # provenance carried over
+    assert regated_card['sha256'] != card['sha256']
+    assert regated_card['figures']['test']['all']['rigid_mean_mm'] == test['all']['rigid_mean_mm']
+
 
 def test_ship_weights_cli_refuses_bad_arguments_before_any_work(tmp_path, capsys):
     require('lightning')
@@ -154,12 +171,21 @@ def test_ship_weights_cli_passes_the_gate_on(tmp_path, monkeypatch, capsys):
             main(['ship-weights', '--ckpt', 'x.ckpt', '--name', 'x', '--data', str(data),
                   *options, '--out-dir', str(tmp_path)])
         assert received['settings'] == settings
+    with pytest.raises(SystemExit):  # shipped weights exported again with another gate
+        main(['ship-weights', '--weights', 'base', '--name', 'x', '--data', str(data),
+              '--clearance-scale', '0.03', '--out-dir', str(tmp_path)])
+    assert received['weights'] == 'base' and received['settings'] == {'clearance_scale': 0.03}
+    with pytest.raises(SystemExit):
+        main(['ship-weights', '--ckpt', 'x.ckpt', '--weights', 'base', '--name', 'x', '--data',
+              str(data), '--out-dir', str(tmp_path)])
+    assert 'not allowed with argument' in capsys.readouterr().err
 
 
 def test_ship_weights_leaves_nothing_when_it_fails(tiny_checkpoint, tiny_windows, tmp_path):
     require('anny')
     require('lightning')
     from swingar_pyg.eval.model_card import ship_weights
+    from swingar_pyg.models.pretrained import WEIGHTS_DIR
 
     other = tmp_path / 'other.yaml'  # a valid config, but not the checkpoint's data
     other.write_text(Path(tiny_windows.hparams.config).read_text())
@@ -178,6 +204,29 @@ def test_ship_weights_leaves_nothing_when_it_fails(tiny_checkpoint, tiny_windows
     with pytest.raises(ValueError, match='no test split at .*swingar make-dataset'):
         ship_weights(tiny_checkpoint, 'tiny', tiny_windows.hparams.config,
                      extra_tests={'unmade': str(unmade)}, out_dir=out, progress=False)
+    val_only = yaml.safe_load(other.read_text())  # no test split to measure
+    val_only['splits'] = {'val': val_only['splits']['val']}
+    (tmp_path / 'val_only.yaml').write_text(yaml.safe_dump(val_only))
+    with pytest.raises(ValueError, match="val_only.yaml has no 'test' split \\(it has val\\)"):
+        ship_weights(tiny_checkpoint, 'tiny', tiny_windows.hparams.config,
+                     extra_tests={'val only': str(tmp_path / 'val_only.yaml')}, out_dir=out,
+                     progress=False)
+    with pytest.raises(ValueError, match='a checkpoint or weights, exactly one of the two'):
+        ship_weights(None, 'tiny', tiny_windows.hparams.config, out_dir=out, progress=False)
+    with pytest.raises(ValueError, match='a checkpoint or weights, exactly one of the two'):
+        ship_weights(tiny_checkpoint, 'tiny', tiny_windows.hparams.config, out_dir=out,
+                     progress=False, weights='base')
+    bare = tmp_path / 'bare'  # shipped weights without their card, then with a wrong card
+    bare.mkdir()
+    shutil.copy(WEIGHTS_DIR / 'base.pt', bare / 'base.pt')
+    with pytest.raises(ValueError, match='no model card .*export its checkpoint with --ckpt'):
+        ship_weights(None, 'tiny', tiny_windows.hparams.config, out_dir=out, progress=False,
+                     weights=bare / 'base.pt')
+    wrong = {**json.loads((WEIGHTS_DIR / 'base.json').read_text()), 'sha256': '0' * 64}
+    (bare / 'base.json').write_text(json.dumps(wrong))
+    with pytest.raises(ValueError, match='describes other weights than'):
+        ship_weights(None, 'tiny', tiny_windows.hparams.config, out_dir=out, progress=False,
+                     weights=bare / 'base.pt')
     for settings, message in (({'channels': 8}, 'only clearance_scale, contact_clearance'),
                               ({'contact_clearance': 0.006}, 'does nothing without a'),
                               ({'clearance_scale': float('inf')}, 'finite positive metres')):
@@ -186,3 +235,26 @@ def test_ship_weights_leaves_nothing_when_it_fails(tiny_checkpoint, tiny_windows
                          progress=False, settings=settings)
     assert [p.name for p in out.iterdir()] == ['tiny.json']
     assert (out / 'tiny.json').read_text() == '{"the": "old card"}'
+
+
+def test_measure_reads_stored_sequences_one_at_a_time_with_the_same_figures(tiny_checkpoint,
+                                                                            tiny_windows):
+    require('anny')
+    require('lightning')
+    from swingar_pyg.eval.error_vs_time import StoredSequences, load_test_sequences
+    from swingar_pyg.eval.model_card import made_split, measure
+    from swingar_pyg.training import load_estimator
+    from swingar_pyg.world.body import AnnyBody
+
+    estimator, data = load_estimator(tiny_checkpoint)
+    body = AnnyBody()
+    _, path = made_split(tiny_windows.hparams.config)
+    loaded = load_test_sequences(path, body)
+    stored = StoredSequences(path, body)
+    assert len(stored) == len(loaded) >= 1 and stored.ids == [s.id for s in loaded]
+    for read, kept in zip(stored, loaded):
+        assert read.id == kept.id and torch.equal(read.truth, kept.truth)
+        assert torch.equal(read.posed.joint_transforms, kept.posed.joint_transforms)
+    lazily, at_once = (measure(estimator, data, sequences, progress=False)
+                       for sequences in (stored, loaded))
+    assert lazily == at_once and lazily['all']['sequences'] == len(loaded)

@@ -48,6 +48,27 @@ class TestSequence:
     posed: object
 
 
+class StoredSequences:
+    """The sequences of a split file (all or ``ids``), each read and its body posed
+    only when iteration reaches it: one sequence in memory at a time, for measures
+    that keep only errors (a base test split posed at once holds gigabytes)."""
+
+    def __init__(self, path, body, ids: list[str] | None = None):
+        import h5py
+
+        if ids is None:
+            with h5py.File(path, "r") as file:
+                ids = sorted(file["sequences"])
+        self.path, self.body, self.ids = path, body, list(ids)
+
+    def __len__(self) -> int:
+        return len(self.ids)
+
+    def __iter__(self):
+        for sequence_id in self.ids:
+            yield from load_test_sequences(self.path, self.body, ids=[sequence_id])
+
+
 def load_test_sequences(path, body, limit: int | None = None,
                         ids: list[str] | None = None) -> list[TestSequence]:
     """The sequences of a split file (all, the first ``limit`` or ``ids``),

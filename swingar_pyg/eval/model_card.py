@@ -17,6 +17,7 @@ import json
 import os
 import tempfile
 from collections import defaultdict
+from collections.abc import Iterable
 from pathlib import Path
 
 import torch
@@ -24,15 +25,28 @@ import yaml
 
 from swingar_pyg.eval.error_vs_time import (
     MethodResult,
+    StoredSequences,
     TestSequence,
     evaluate_estimator,
     evaluate_rigid,
     load_test_sequences,
 )
 from swingar_pyg.models import SwinGarEstimator
-from swingar_pyg.models.pretrained import WEIGHTS_DIR, weights_sha256
+from swingar_pyg.models.pretrained import (
+    WEIGHTS_DIR,
+    read_weights,
+    weights_path,
+    weights_sha256,
+    write_weights,
+)
 from swingar_pyg.sim import SIMULATOR_REVISION
-from swingar_pyg.training import export_weights, garment_family, load_pretrained
+from swingar_pyg.training import (
+    error_stats,
+    export_arguments,
+    export_weights,
+    garment_family,
+    load_pretrained,
+)
 from swingar_pyg.world.body import AnnyBody
 from swingar_pyg.world.dataset import DatasetConfig, make_dataset
 from swingar_pyg.world.sequence_file import simulator_revisions
@@ -51,41 +65,48 @@ CHECK_SLICE = {
 
 
 def family_figures(estimator: MethodResult, rigid: MethodResult,
-                   sequences: list[TestSequence]) -> dict:
+                   families: dict[str, str]) -> dict:
     """Per garment family and over all: the estimator's and rigid skinning's mean
-    and p95 error (mm), and their ratios (estimator / rigid; below 1 is better)."""
-    families: dict[str, list[TestSequence]] = defaultdict(list)
-    for s in sequences:
-        families[garment_family(s.garment.name)].append(s)
+    and p95 error (mm), and their ratios (estimator / rigid; below 1 is better).
+    ``families`` maps each sequence id to its garment family."""
+    grouped: dict[str, list[str]] = defaultdict(list)
+    for sequence_id, family in families.items():
+        grouped[family].append(sequence_id)
 
-    def row(chosen: list[TestSequence]) -> dict:
-        mine, base = estimator.stats(chosen), rigid.stats(chosen)
-        return {"sequences": len(chosen),
+    def row(ids: list[str]) -> dict:
+        mine, base = (error_stats(torch.cat([method.errors[i].reshape(-1) for i in ids]))
+                      for method in (estimator, rigid))
+        return {"sequences": len(ids),
                 "estimator_mean_mm": mine["mean_mm"], "estimator_p95_mm": mine["p95_mm"],
                 "rigid_mean_mm": base["mean_mm"], "rigid_p95_mm": base["p95_mm"],
                 "mean_ratio": mine["mean_mm"] / base["mean_mm"],
                 "p95_ratio": mine["p95_mm"] / base["p95_mm"]}
 
-    return {"all": row(sequences),
-            **{family: row(chosen) for family, chosen in sorted(families.items())}}
+    return {"all": row(list(families)),
+            **{family: row(ids) for family, ids in sorted(grouped.items())}}
 
 
-def measure(estimator: SwinGarEstimator, data_settings: dict, sequences: list[TestSequence],
-            progress: bool = True) -> dict:
-    """:func:`family_figures` of the estimator streamed in fp32 over ``sequences``."""
-    results = []
-    chosen = sequences
+def measure(estimator: SwinGarEstimator, data_settings: dict,
+            sequences: Iterable[TestSequence], progress: bool = True) -> dict:
+    """:func:`family_figures` of the estimator streamed in fp32 and of rigid skinning
+    over ``sequences``, taken one at a time (a :class:`StoredSequences` keeps one in
+    memory)."""
+    streamed = MethodResult("estimator", "estimator", {}, [])
+    rigid = MethodResult("rigid skinning", "rigid", {}, [])
+    families = {}
     if progress:
         from tqdm import tqdm
 
-        chosen = tqdm(sequences, desc="estimator on the test split", unit="sequence")
-    for s in chosen:
-        results.append(evaluate_estimator("estimator", estimator, [s],
-                                          data_settings["sigma"], data_settings["seed"]))
-    streamed = MethodResult("estimator", "estimator",
-                            {k: v for r in results for k, v in r.errors.items()},
-                            [t for r in results for t in r.seconds])
-    return family_figures(streamed, evaluate_rigid(sequences), sequences)
+        sequences = tqdm(sequences, desc="estimator and rigid skinning", unit="sequence")
+    for s in sequences:
+        for combined, result in ((streamed, evaluate_estimator("estimator", estimator, [s],
+                                                              data_settings["sigma"],
+                                                              data_settings["seed"])),
+                                 (rigid, evaluate_rigid([s]))):
+            combined.errors.update(result.errors)
+            combined.seconds += result.seconds
+        families[s.id] = garment_family(s.garment.name)
+    return family_figures(streamed, rigid, families)
 
 
 def check_slice_figures(estimator: SwinGarEstimator, data_settings: dict, body=None,
@@ -121,25 +142,57 @@ def labelled_configs(items: list[str], option: str) -> dict[str, str]:
     return configs
 
 
-def made_test_split(config_path: str | Path) -> tuple[DatasetConfig, Path]:
-    """A dataset config and its test split file; raises ``ValueError`` if either is
-    missing (this never starts a simulation)."""
+def made_split(config_path: str | Path, split: str = "test") -> tuple[DatasetConfig, Path]:
+    """A dataset config and the file of one of its splits; raises ``ValueError`` if
+    the config, the split or its file is missing (this never starts a simulation)."""
     if not Path(config_path).is_file():
         raise ValueError(f"no dataset config at {config_path}")
     config = DatasetConfig.from_yaml(config_path)
-    path = Path(config.output) / "test.h5"
+    if split not in config.blocks:
+        raise ValueError(f"{config_path} has no {split!r} split (it has "
+                         f"{', '.join(config.blocks)})")
+    path = Path(config.output) / f"{split}.h5"
     if not path.exists():
-        raise ValueError(f"no test split at {path}; make it first with `swingar make-dataset -c "
-                         f"{config_path}` (it simulates every split of the config)")
+        raise ValueError(f"no {split} split at {path}; make it first with `swingar make-dataset "
+                         f"-c {config_path}` (it simulates every split of the config)")
     return config, path
 
 
-def ship_weights(checkpoint: str | Path, name: str, dataset: str | Path,
+def reexport_weights(weights: str | Path, out: str | Path, settings: dict | None = None) -> dict:
+    """Writes shipped ``weights`` (a name or a ``.pt`` file with its card
+    ``<name>.json`` beside it) again with their
+    :data:`~swingar_pyg.training.checkpoints.EXPORT_SETTINGS` replaced by
+    ``settings``: the gate of a trained network set anew without its checkpoint.
+    Returns what :func:`~swingar_pyg.training.export_weights` returns, the training
+    provenance taken from the card (which must name these weights by sha256)."""
+    path = weights_path(weights)
+    record = read_weights(path)
+    card_path = path.with_suffix(".json")
+    if not card_path.is_file():
+        raise ValueError(f"no model card {card_path} beside {path}: its training provenance "
+                         "is unknown; export its checkpoint with --ckpt instead")
+    card = json.loads(card_path.read_text())
+    if card.get("sha256") != weights_sha256(path):
+        raise ValueError(f"{card_path} describes other weights than {path} (sha256 differs)")
+    arguments = export_arguments(record["estimator"], settings)
+    exported = SwinGarEstimator(**arguments)  # its ValueError names a bad setting
+    exported.load_state_dict(record["state_dict"])
+    write_weights(out, arguments, exported.state_dict(), record["data"])
+    training = card["training"]
+    return {"estimator": arguments, "data": record["data"], "training": training["module"],
+            "datamodule": training["datamodule"], "step": training["step"],
+            "checkpoint": training["checkpoint"], "command": training["command"],
+            "set_at_export": {**card.get("set_at_export", {}), **(settings or {})}}
+
+
+def ship_weights(checkpoint: str | Path | None, name: str, dataset: str | Path,
                  extra_tests: dict[str, str] | None = None, command: str | None = None,
                  out_dir: str | Path = WEIGHTS_DIR, check_slice: dict = CHECK_SLICE,
-                 progress: bool = True, settings: dict | None = None) -> Path:
+                 progress: bool = True, settings: dict | None = None,
+                 weights: str | Path | None = None) -> Path:
     """Exports ``checkpoint`` as ``<out_dir>/<name>.pt`` (with the estimator
-    ``settings`` of :func:`~swingar_pyg.training.export_weights`), measures it on the test
+    ``settings`` of :func:`~swingar_pyg.training.export_weights`), or instead shipped
+    ``weights`` (re-exported by :func:`reexport_weights`), measures it on the test
     split of ``dataset`` (the config it was trained on), on each of ``extra_tests``
     (``{label: dataset config}``) and on ``check_slice`` (a dataset recipe with one
     test split), and writes the card ``<name>.json`` and ``<name>.md``. Returns
@@ -149,31 +202,37 @@ def ship_weights(checkpoint: str | Path, name: str, dataset: str | Path,
     files are moved into place only once all is measured: a failure leaves the
     folder as it was."""
     check_weights_name(name)
+    if (checkpoint is None) == (weights is None):
+        raise ValueError("ship a checkpoint or weights, exactly one of the two")
     out_dir = Path(out_dir)
     body = AnnyBody()
-    config, test_path = made_test_split(dataset)
-    extra_paths = {label: made_test_split(path)[1]
+    config, test_path = made_split(dataset)
+    extra_paths = {label: made_split(path)[1]
                    for label, path in (extra_tests or {}).items()}
     out_dir.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(dir=out_dir, prefix=f".{name}-") as staging:
         staged = Path(staging)
-        provenance = export_weights(checkpoint, staged / f"{name}.pt", settings)
+        if weights is None:
+            provenance = export_weights(checkpoint, staged / f"{name}.pt", settings)
+        else:
+            provenance = reexport_weights(weights, staged / f"{name}.pt", settings)
         trained_on = provenance["datamodule"].get("config")
         if trained_on is not None and Path(trained_on).resolve() != Path(dataset).resolve():
-            raise ValueError(f"{checkpoint} was trained on {trained_on}, not {dataset}: "
-                             "measure it on the test split of its own data")
+            raise ValueError(f"{checkpoint or weights} was trained on {trained_on}, not "
+                             f"{dataset}: measure it on the test split of its own data")
         estimator, data_settings = load_pretrained(staged / f"{name}.pt")
-        figures = {"test": measure(estimator, data_settings, load_test_sequences(test_path, body),
+        figures = {"test": measure(estimator, data_settings, StoredSequences(test_path, body),
                                    progress)}
         for label, path in extra_paths.items():
-            figures[label] = measure(estimator, data_settings, load_test_sequences(path, body),
+            figures[label] = measure(estimator, data_settings, StoredSequences(path, body),
                                      progress)
         check = check_slice_figures(estimator, data_settings, body, check_slice, progress)
         card = {
             "name": name, "weights": f"{name}.pt",
             "sha256": weights_sha256(staged / f"{name}.pt"),
             "parameters": sum(p.numel() for p in estimator.parameters()),
-            "estimator": provenance["estimator"], "set_at_export": dict(settings or {}),
+            "estimator": provenance["estimator"],
+            "set_at_export": provenance.get("set_at_export", dict(settings or {})),
             "descriptor": provenance["data"],
             "data": {"config": str(dataset), "name": config.name,
                      "simulator_revisions": sorted(simulator_revisions(test_path)),
@@ -184,7 +243,8 @@ def ship_weights(checkpoint: str | Path, name: str, dataset: str | Path,
                      "motions": {split: [m.kind for m in ms]
                                  for split, ms in config.motions.items()},
                      "body_shapes": len(config.body_shapes)},
-            "training": {"command": command, "checkpoint": str(checkpoint),
+            "training": {"command": command or provenance.get("command"),
+                         "checkpoint": provenance.get("checkpoint", str(checkpoint)),
                          "step": provenance["step"], "module": provenance["training"],
                          "datamodule": provenance["datamodule"]},
             "figures": figures,

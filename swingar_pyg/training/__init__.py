@@ -2,6 +2,7 @@
 
 from swingar_pyg.training.body_sdf_module import BodySDFModule
 from swingar_pyg.training.checkpoints import (
+    export_arguments,
     export_weights,
     load_body_sdf,
     load_estimator,
@@ -10,5 +11,6 @@ from swingar_pyg.training.checkpoints import (
 from swingar_pyg.training.module import SwinGarModule
 from swingar_pyg.training.vertex_errors import VertexErrors, error_stats, garment_family
 
-__all__ = ["BodySDFModule", "SwinGarModule", "VertexErrors", "error_stats", "export_weights",
-           "garment_family", "load_body_sdf", "load_estimator", "load_pretrained"]
+__all__ = ["BodySDFModule", "SwinGarModule", "VertexErrors", "error_stats", "export_arguments",
+           "export_weights", "garment_family", "load_body_sdf", "load_estimator",
+           "load_pretrained"]

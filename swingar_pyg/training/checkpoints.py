@@ -44,6 +44,20 @@ def load_pretrained(name_or_path: str | Path = "base") -> tuple[SwinGarEstimator
 EXPORT_SETTINGS = ("clearance_scale", "contact_clearance")
 
 
+def export_arguments(arguments: dict, settings: dict | None) -> dict:
+    """A trained estimator's init ``arguments`` with its :data:`EXPORT_SETTINGS`
+    replaced by ``settings``; raises ``ValueError`` on any other setting and on a
+    contact clearance without a clearance scale."""
+    unknown = set(settings or {}) - set(EXPORT_SETTINGS)
+    if unknown:
+        raise ValueError(f"only {', '.join(EXPORT_SETTINGS)} can be set at export, "
+                         f"got {', '.join(sorted(unknown))}")
+    arguments = {**arguments, **(settings or {})}
+    if arguments.get("clearance_scale") is None and arguments.get("contact_clearance"):
+        raise ValueError("a contact_clearance does nothing without a clearance_scale")
+    return arguments
+
+
 def export_weights(checkpoint: str | Path, out: str | Path,
                    settings: dict | None = None) -> dict:
     """Writes the estimator of a ``swingar fit`` checkpoint as a weights file
@@ -51,19 +65,13 @@ def export_weights(checkpoint: str | Path, out: str | Path,
     replaced by ``settings``; returns what the model card needs from the
     checkpoint: the estimator's arguments, the data and training
     hyperparameters, and the step."""
-    unknown = set(settings or {}) - set(EXPORT_SETTINGS)
-    if unknown:
-        raise ValueError(f"only {', '.join(EXPORT_SETTINGS)} can be set at export, "
-                         f"got {', '.join(sorted(unknown))}")
     path = _existing(checkpoint, "no checkpoint")
     saved = torch.load(path, map_location="cpu", weights_only=False)
     network = saved["hyper_parameters"].get("estimator")
     if not isinstance(network, dict) or "init_args" not in network:
         raise ValueError(f"{checkpoint} was not written by `swingar fit` with a config "
                          "(its hyperparameters lack the estimator's init_args)")
-    arguments = {**network["init_args"], **(settings or {})}
-    if arguments.get("clearance_scale") is None and arguments.get("contact_clearance"):
-        raise ValueError("a contact_clearance does nothing without a clearance_scale")
+    arguments = export_arguments(network["init_args"], settings)
     data = saved.get("datamodule_hyper_parameters", {})
     descriptor = {"sigma": float(data.get("sigma", DESCRIPTOR_SIGMA)),
                   "seed": int(data.get("seed", 0))}
