@@ -56,7 +56,8 @@ def layer_spread(estimator: SwinGarEstimator, graph) -> list[dict]:
         relative = weights * in_degree[target]
         entropy = scatter(-weights * weights.clamp_min(1e-300).log(), target,
                           dim_size=graph.num_nodes, reduce="sum")
-        normalised = entropy / in_degree.clamp_min(2).log()
+        attending = in_degree > 1  # a vertex with only its self-loop has no choice to make
+        normalised = entropy[attending] / in_degree[attending].log()
         rows.append({"relative_weight_quantiles": dict(zip(
             map(str, QUANTILES), torch.quantile(relative, torch.tensor(
                 QUANTILES, dtype=torch.float64)).tolist())),

@@ -57,9 +57,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--weights", default="base", help="a shipped name or a .pt file")
     parser.add_argument("--data", default="configs/data/base.yaml")
-    parser.add_argument("--split", default="val", choices=["val", "test"],
-                        help="the split measured of every dataset (default: val)")
-    parser.add_argument("--extra-data", action="append", default=[], metavar="LABEL=CONFIG",
+    parser.add_argument("--split", default="test", choices=["val", "test"],
+                        help="the split measured of every dataset: val to choose a gate, test "
+                             "to confirm it (default: test)")
+    parser.add_argument("--extra-data", "--extra-test", action="append", default=[],
+                        metavar="LABEL=CONFIG",
                         help="another dataset config whose split is measured")
     parser.add_argument("--stride", type=int, default=1,
                         help="every k-th sequence of each split (default: all)")

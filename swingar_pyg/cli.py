@@ -329,9 +329,10 @@ def build_parser() -> argparse.ArgumentParser:
     report.set_defaults(run=_report)
 
     ship = commands.add_parser(
-        "ship-weights", help="export a checkpoint as weights inside the package "
-                             "(swingar_pyg/weights/NAME.pt) and measure its model card "
-                             "(NAME.json, NAME.md) on a test split and a check slice")
+        "ship-weights", help="export a checkpoint (or shipped weights, with another gate) as "
+                             "weights inside the package (swingar_pyg/weights/NAME.pt) and "
+                             "measure its model card (NAME.json, NAME.md) on a test split and "
+                             "a check slice")
     shipped = ship.add_mutually_exclusive_group(required=True)
     shipped.add_argument("--ckpt", help="a checkpoint of `swingar fit`")
     shipped.add_argument("--weights", metavar="NAME|PT",
@@ -352,8 +353,9 @@ def build_parser() -> argparse.ArgumentParser:
                            "learned terms fade in over M metres of rest clearance "
                            "(SwinGarEstimator's clearance_scale)")
     ship.add_argument("--contact-clearance", type=_metres, default=None, metavar="M",
-                      help="with --clearance-scale: the rest clearance of cloth lying on the "
-                           "body, skinned rigidly (e.g. 0.006, the dressing clearance)")
+                      help="with a clearance scale (--clearance-scale, or the one --weights "
+                           "carry): the rest clearance of cloth lying on the body, skinned "
+                           "rigidly (e.g. 0.006, the dressing clearance)")
     ship.add_argument("--out-dir", default=None, help="default: swingar_pyg/weights")
     ship.set_defaults(run=_ship_weights)
 

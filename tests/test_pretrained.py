@@ -112,20 +112,22 @@ def test_ship_weights_writes_weights_and_a_card_that_re_measures(tiny_checkpoint
     assert f"{test['all']['estimator_mean_mm']:.1f}" in markdown
     assert 'Set on the trained network at export' in markdown
 
-    # the gate set anew on the shipped weights, without the checkpoint
-    again_dir = tmp_path / 'regated'
-    regated_path = ship_weights(None, 'tiny', tiny_windows.hparams.config, out_dir=again_dir,
+    # the gate set anew on the shipped weights, without the checkpoint, onto themselves
+    regated_path = ship_weights(None, 'tiny', tiny_windows.hparams.config, out_dir=tmp_path,
                                 check_slice=TINY_CHECK_SLICE, progress=False,
                                 settings={'clearance_scale': 0.05}, weights=tmp_path / 'tiny.pt')
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['tiny.json', 'tiny.md', 'tiny.pt']
     regated_card = json.loads(regated_path.read_text())
-    regated, _ = load_pretrained(again_dir / 'tiny.pt')
+    regated, _ = load_pretrained(tmp_path / 'tiny.pt')
     for name, value in trained.state_dict().items():
         assert torch.equal(regated.state_dict()[name], value), name
     assert (regated.clearance_scale, regated.contact_clearance) == (0.05, 0.006)
     assert regated_card['set_at_export'] == {'clearance_scale': 0.05, 'contact_clearance': 0.006}
     assert regated_card['training'] == card['training']  # provenance carried over
-    assert regated_card['sha256'] != card['sha256']
+    assert regated_card['exported_from'] == {'weights': 'tiny.pt', 'sha256': card['sha256']}
+    assert regated_card['sha256'] != card['sha256'] and 'exported_from' not in card
     assert regated_card['figures']['test']['all']['rigid_mean_mm'] == test['all']['rigid_mean_mm']
+    assert f"sha256 `{card['sha256'][:16]}" in (tmp_path / 'tiny.md').read_text()
 
 
 def test_ship_weights_cli_refuses_bad_arguments_before_any_work(tmp_path, capsys):
@@ -185,7 +187,7 @@ def test_ship_weights_leaves_nothing_when_it_fails(tiny_checkpoint, tiny_windows
     require('anny')
     require('lightning')
     from swingar_pyg.eval.model_card import ship_weights
-    from swingar_pyg.models.pretrained import WEIGHTS_DIR
+    from swingar_pyg.models.pretrained import WEIGHTS_DIR, weights_sha256
 
     other = tmp_path / 'other.yaml'  # a valid config, but not the checkpoint's data
     other.write_text(Path(tiny_windows.hparams.config).read_text())
@@ -227,6 +229,10 @@ def test_ship_weights_leaves_nothing_when_it_fails(tiny_checkpoint, tiny_windows
     with pytest.raises(ValueError, match='describes other weights than'):
         ship_weights(None, 'tiny', tiny_windows.hparams.config, out_dir=out, progress=False,
                      weights=bare / 'base.pt')
+    (bare / 'base.json').write_text(json.dumps({'sha256': weights_sha256(bare / 'base.pt')}))
+    with pytest.raises(ValueError, match='holds no training provenance'):
+        ship_weights(None, 'tiny', tiny_windows.hparams.config, out_dir=out, progress=False,
+                     weights=bare / 'base.pt')
     for settings, message in (({'channels': 8}, 'only clearance_scale, contact_clearance'),
                               ({'contact_clearance': 0.006}, 'does nothing without a'),
                               ({'clearance_scale': float('inf')}, 'finite positive metres')):
@@ -238,10 +244,17 @@ def test_ship_weights_leaves_nothing_when_it_fails(tiny_checkpoint, tiny_windows
 
 
 def test_measure_reads_stored_sequences_one_at_a_time_with_the_same_figures(tiny_checkpoint,
-                                                                            tiny_windows):
+                                                                            tiny_windows,
+                                                                            monkeypatch):
     require('anny')
     require('lightning')
-    from swingar_pyg.eval.error_vs_time import StoredSequences, load_test_sequences
+    import swingar_pyg.eval.error_vs_time as error_vs_time
+    from swingar_pyg.eval.error_vs_time import (
+        StoredSequences,
+        evaluate_estimator,
+        evaluate_rigid,
+        load_test_sequences,
+    )
     from swingar_pyg.eval.model_card import made_split, measure
     from swingar_pyg.training import load_estimator
     from swingar_pyg.world.body import AnnyBody
@@ -252,9 +265,23 @@ def test_measure_reads_stored_sequences_one_at_a_time_with_the_same_figures(tiny
     loaded = load_test_sequences(path, body)
     stored = StoredSequences(path, body)
     assert len(stored) == len(loaded) >= 1 and stored.ids == [s.id for s in loaded]
+    reads = []
+
+    def counted(*args, **kwargs):
+        reads.append(kwargs['ids'])
+        return load_test_sequences(*args, **kwargs)
+
+    monkeypatch.setattr(error_vs_time, 'load_test_sequences', counted)
     for read, kept in zip(stored, loaded):
         assert read.id == kept.id and torch.equal(read.truth, kept.truth)
         assert torch.equal(read.posed.joint_transforms, kept.posed.joint_transforms)
-    lazily, at_once = (measure(estimator, data, sequences, progress=False)
-                       for sequences in (stored, loaded))
-    assert lazily == at_once and lazily['all']['sequences'] == len(loaded)
+    assert reads == [[s.id] for s in loaded]  # one sequence a read
+    lazily = measure(estimator, data, stored, progress=False)
+    rigid = evaluate_rigid(loaded).stats()
+    streamed = evaluate_estimator('estimator', estimator, loaded, data['sigma'],
+                                  data['seed']).stats()
+    assert lazily['all']['sequences'] == len(loaded)
+    assert lazily['all']['rigid_mean_mm'] == pytest.approx(rigid['mean_mm'], rel=1e-6)
+    assert lazily['all']['estimator_p95_mm'] == pytest.approx(streamed['p95_mm'], rel=1e-6)
+    assert lazily['all']['mean_ratio'] == pytest.approx(
+        streamed['mean_mm'] / rigid['mean_mm'], rel=1e-6)

@@ -1,6 +1,7 @@
 """``swingar ship-weights``: a trained checkpoint becomes weights inside the
 package (``swingar_pyg/weights/<name>.pt``) with a model card beside them
-(``<name>.json``, and ``<name>.md`` for people).
+(``<name>.json``, and ``<name>.md`` for people). Shipped weights can be
+exported again with another clearance gate; their card's provenance carries over.
 
 The card records what the network was trained on (the data config, its
 sequences, the simulator revision), how (the training arguments, the step),
@@ -91,22 +92,18 @@ def measure(estimator: SwinGarEstimator, data_settings: dict,
     """:func:`family_figures` of the estimator streamed in fp32 and of rigid skinning
     over ``sequences``, taken one at a time (a :class:`StoredSequences` keeps one in
     memory)."""
-    streamed = MethodResult("estimator", "estimator", {}, [])
-    rigid = MethodResult("rigid skinning", "rigid", {}, [])
-    families = {}
+    streamed, rigid, families = {}, {}, {}
     if progress:
         from tqdm import tqdm
 
         sequences = tqdm(sequences, desc="estimator and rigid skinning", unit="sequence")
     for s in sequences:
-        for combined, result in ((streamed, evaluate_estimator("estimator", estimator, [s],
-                                                              data_settings["sigma"],
-                                                              data_settings["seed"])),
-                                 (rigid, evaluate_rigid([s]))):
-            combined.errors.update(result.errors)
-            combined.seconds += result.seconds
+        streamed.update(evaluate_estimator("estimator", estimator, [s], data_settings["sigma"],
+                                           data_settings["seed"]).errors)
+        rigid.update(evaluate_rigid([s]).errors)
         families[s.id] = garment_family(s.garment.name)
-    return family_figures(streamed, rigid, families)
+    return family_figures(MethodResult("estimator", "estimator", streamed, []),
+                          MethodResult("rigid skinning", "rigid", rigid, []), families)
 
 
 def check_slice_figures(estimator: SwinGarEstimator, data_settings: dict, body=None,
@@ -150,7 +147,7 @@ def made_split(config_path: str | Path, split: str = "test") -> tuple[DatasetCon
     config = DatasetConfig.from_yaml(config_path)
     if split not in config.blocks:
         raise ValueError(f"{config_path} has no {split!r} split (it has "
-                         f"{', '.join(config.blocks)})")
+                         f"{', '.join(config.blocks) or 'none'})")
     path = Path(config.output) / f"{split}.h5"
     if not path.exists():
         raise ValueError(f"no {split} split at {path}; make it first with `swingar make-dataset "
@@ -174,6 +171,8 @@ def reexport_weights(weights: str | Path, out: str | Path, settings: dict | None
     card = json.loads(card_path.read_text())
     if card.get("sha256") != weights_sha256(path):
         raise ValueError(f"{card_path} describes other weights than {path} (sha256 differs)")
+    if not isinstance(card.get("training"), dict):
+        raise ValueError(f"{card_path} holds no training provenance; is it a model card?")
     arguments = export_arguments(record["estimator"], settings)
     exported = SwinGarEstimator(**arguments)  # its ValueError names a bad setting
     exported.load_state_dict(record["state_dict"])
@@ -182,7 +181,8 @@ def reexport_weights(weights: str | Path, out: str | Path, settings: dict | None
     return {"estimator": arguments, "data": record["data"], "training": training["module"],
             "datamodule": training["datamodule"], "step": training["step"],
             "checkpoint": training["checkpoint"], "command": training["command"],
-            "set_at_export": {**card.get("set_at_export", {}), **(settings or {})}}
+            "set_at_export": {**card.get("set_at_export", {}), **(settings or {})},
+            "exported_from": {"weights": path.name, "sha256": card["sha256"]}}
 
 
 def ship_weights(checkpoint: str | Path | None, name: str, dataset: str | Path,
@@ -247,6 +247,8 @@ def ship_weights(checkpoint: str | Path | None, name: str, dataset: str | Path,
                          "checkpoint": provenance.get("checkpoint", str(checkpoint)),
                          "step": provenance["step"], "module": provenance["training"],
                          "datamodule": provenance["datamodule"]},
+            **({"exported_from": provenance["exported_from"]}
+               if "exported_from" in provenance else {}),
             "figures": figures,
             "check_slice": {"recipe": check_slice, "simulator_revision": SIMULATOR_REVISION,
                             "figures": check},
@@ -283,6 +285,9 @@ def card_markdown(card: dict) -> str:
         "```json", json.dumps(card["estimator"], indent=1), "```", "",
         *([f"Set on the trained network at export: `{json.dumps(card['set_at_export'])}`.", ""]
           if card.get("set_at_export") else []),
+        *([f"Exported again from `{card['exported_from']['weights']}` (sha256 "
+           f"`{card['exported_from']['sha256'][:16]}…`), the same network.", ""]
+          if card.get("exported_from") else []),
         f"Descriptor: sigma {card['descriptor']['sigma']}, seed {card['descriptor']['seed']}.", "",
         "## Training data", "",
         f"`{data['config']}` (test split made by simulator revision(s) "
