@@ -23,9 +23,9 @@ from pathlib import Path
 
 import torch
 import yaml
+from torch import Tensor
 
 from swingar_pyg.eval.error_vs_time import (
-    MethodResult,
     StoredSequences,
     TestSequence,
     evaluate_estimator,
@@ -33,20 +33,14 @@ from swingar_pyg.eval.error_vs_time import (
     load_test_sequences,
 )
 from swingar_pyg.models import SwinGarEstimator
-from swingar_pyg.models.pretrained import (
-    WEIGHTS_DIR,
-    read_weights,
-    weights_path,
-    weights_sha256,
-    write_weights,
-)
+from swingar_pyg.models.pretrained import WEIGHTS_DIR, read_weights, weights_path, weights_sha256
 from swingar_pyg.sim import SIMULATOR_REVISION
 from swingar_pyg.training import (
     error_stats,
-    export_arguments,
     export_weights,
     garment_family,
     load_pretrained,
+    write_exported_weights,
 )
 from swingar_pyg.world.body import AnnyBody
 from swingar_pyg.world.dataset import DatasetConfig, make_dataset
@@ -65,18 +59,19 @@ CHECK_SLICE = {
 }
 
 
-def family_figures(estimator: MethodResult, rigid: MethodResult,
+def family_figures(estimator: dict[str, Tensor], rigid: dict[str, Tensor],
                    families: dict[str, str]) -> dict:
     """Per garment family and over all: the estimator's and rigid skinning's mean
     and p95 error (mm), and their ratios (estimator / rigid; below 1 is better).
-    ``families`` maps each sequence id to its garment family."""
+    ``estimator`` and ``rigid`` map each sequence id to its errors ``(T, N)`` (mm),
+    ``families`` to its garment family."""
     grouped: dict[str, list[str]] = defaultdict(list)
     for sequence_id, family in families.items():
         grouped[family].append(sequence_id)
 
     def row(ids: list[str]) -> dict:
-        mine, base = (error_stats(torch.cat([method.errors[i].reshape(-1) for i in ids]))
-                      for method in (estimator, rigid))
+        mine, base = (error_stats(torch.cat([errors[i].reshape(-1) for i in ids]))
+                      for errors in (estimator, rigid))
         return {"sequences": len(ids),
                 "estimator_mean_mm": mine["mean_mm"], "estimator_p95_mm": mine["p95_mm"],
                 "rigid_mean_mm": base["mean_mm"], "rigid_p95_mm": base["p95_mm"],
@@ -102,8 +97,7 @@ def measure(estimator: SwinGarEstimator, data_settings: dict,
                                            data_settings["seed"]).errors)
         rigid.update(evaluate_rigid([s]).errors)
         families[s.id] = garment_family(s.garment.name)
-    return family_figures(MethodResult("estimator", "estimator", streamed, []),
-                          MethodResult("rigid skinning", "rigid", rigid, []), families)
+    return family_figures(streamed, rigid, families)
 
 
 def check_slice_figures(estimator: SwinGarEstimator, data_settings: dict, body=None,
@@ -160,8 +154,9 @@ def reexport_weights(weights: str | Path, out: str | Path, settings: dict | None
     ``<name>.json`` beside it) again with their
     :data:`~swingar_pyg.training.checkpoints.EXPORT_SETTINGS` replaced by
     ``settings``: the gate of a trained network set anew without its checkpoint.
-    Returns what :func:`~swingar_pyg.training.export_weights` returns, the training
-    provenance taken from the card (which must name these weights by sha256)."""
+    Returns what :func:`~swingar_pyg.training.export_weights` returns, with the
+    training provenance (checkpoint, command) taken from the card, which must name
+    these weights by sha256, and the weights it was exported from."""
     path = weights_path(weights)
     record = read_weights(path)
     card_path = path.with_suffix(".json")
@@ -173,10 +168,8 @@ def reexport_weights(weights: str | Path, out: str | Path, settings: dict | None
         raise ValueError(f"{card_path} describes other weights than {path} (sha256 differs)")
     if not isinstance(card.get("training"), dict):
         raise ValueError(f"{card_path} holds no training provenance; is it a model card?")
-    arguments = export_arguments(record["estimator"], settings)
-    exported = SwinGarEstimator(**arguments)  # its ValueError names a bad setting
-    exported.load_state_dict(record["state_dict"])
-    write_weights(out, arguments, exported.state_dict(), record["data"])
+    arguments = write_exported_weights(out, record["estimator"], settings, record["state_dict"],
+                                       record["data"])
     training = card["training"]
     return {"estimator": arguments, "data": record["data"], "training": training["module"],
             "datamodule": training["datamodule"], "step": training["step"],
@@ -213,7 +206,9 @@ def ship_weights(checkpoint: str | Path | None, name: str, dataset: str | Path,
     with tempfile.TemporaryDirectory(dir=out_dir, prefix=f".{name}-") as staging:
         staged = Path(staging)
         if weights is None:
-            provenance = export_weights(checkpoint, staged / f"{name}.pt", settings)
+            provenance = {**export_weights(checkpoint, staged / f"{name}.pt", settings),
+                          "checkpoint": str(checkpoint), "command": None,
+                          "exported_from": None}
         else:
             provenance = reexport_weights(weights, staged / f"{name}.pt", settings)
         trained_on = provenance["datamodule"].get("config")
@@ -232,7 +227,7 @@ def ship_weights(checkpoint: str | Path | None, name: str, dataset: str | Path,
             "sha256": weights_sha256(staged / f"{name}.pt"),
             "parameters": sum(p.numel() for p in estimator.parameters()),
             "estimator": provenance["estimator"],
-            "set_at_export": provenance.get("set_at_export", dict(settings or {})),
+            "set_at_export": provenance["set_at_export"],
             "descriptor": provenance["data"],
             "data": {"config": str(dataset), "name": config.name,
                      "simulator_revisions": sorted(simulator_revisions(test_path)),
@@ -243,12 +238,12 @@ def ship_weights(checkpoint: str | Path | None, name: str, dataset: str | Path,
                      "motions": {split: [m.kind for m in ms]
                                  for split, ms in config.motions.items()},
                      "body_shapes": len(config.body_shapes)},
-            "training": {"command": command or provenance.get("command"),
-                         "checkpoint": provenance.get("checkpoint", str(checkpoint)),
+            "training": {"command": command or provenance["command"],
+                         "checkpoint": provenance["checkpoint"],
                          "step": provenance["step"], "module": provenance["training"],
                          "datamodule": provenance["datamodule"]},
             **({"exported_from": provenance["exported_from"]}
-               if "exported_from" in provenance else {}),
+               if provenance["exported_from"] else {}),
             "figures": figures,
             "check_slice": {"recipe": check_slice, "simulator_revision": SIMULATOR_REVISION,
                             "figures": check},

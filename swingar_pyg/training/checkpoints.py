@@ -44,10 +44,13 @@ def load_pretrained(name_or_path: str | Path = "base") -> tuple[SwinGarEstimator
 EXPORT_SETTINGS = ("clearance_scale", "contact_clearance")
 
 
-def export_arguments(arguments: dict, settings: dict | None) -> dict:
-    """A trained estimator's init ``arguments`` with its :data:`EXPORT_SETTINGS`
-    replaced by ``settings``; raises ``ValueError`` on any other setting and on a
-    contact clearance without a clearance scale."""
+def write_exported_weights(out: str | Path, arguments: dict, settings: dict | None,
+                           state_dict: dict, data_settings: dict) -> dict:
+    """Writes a trained network (its init ``arguments`` and ``state_dict``) as a
+    weights file with its :data:`EXPORT_SETTINGS` replaced by ``settings``, and
+    returns the arguments written. Raises ``ValueError`` on any other setting, on a
+    contact clearance without a clearance scale and on a setting the estimator
+    refuses."""
     unknown = set(settings or {}) - set(EXPORT_SETTINGS)
     if unknown:
         raise ValueError(f"only {', '.join(EXPORT_SETTINGS)} can be set at export, "
@@ -55,6 +58,9 @@ def export_arguments(arguments: dict, settings: dict | None) -> dict:
     arguments = {**arguments, **(settings or {})}
     if arguments.get("clearance_scale") is None and arguments.get("contact_clearance"):
         raise ValueError("a contact_clearance does nothing without a clearance_scale")
+    exported = SwinGarEstimator(**arguments)  # its ValueError names a bad setting
+    exported.load_state_dict(state_dict)
+    write_weights(out, arguments, exported.state_dict(), data_settings)
     return arguments
 
 
@@ -64,26 +70,24 @@ def export_weights(checkpoint: str | Path, out: str | Path,
     (:mod:`swingar_pyg.models.pretrained`), with its :data:`EXPORT_SETTINGS`
     replaced by ``settings``; returns what the model card needs from the
     checkpoint: the estimator's arguments, the data and training
-    hyperparameters, and the step."""
+    hyperparameters, the step and the settings set at export."""
     path = _existing(checkpoint, "no checkpoint")
     saved = torch.load(path, map_location="cpu", weights_only=False)
     network = saved["hyper_parameters"].get("estimator")
     if not isinstance(network, dict) or "init_args" not in network:
         raise ValueError(f"{checkpoint} was not written by `swingar fit` with a config "
                          "(its hyperparameters lack the estimator's init_args)")
-    arguments = export_arguments(network["init_args"], settings)
     data = saved.get("datamodule_hyper_parameters", {})
     descriptor = {"sigma": float(data.get("sigma", DESCRIPTOR_SIGMA)),
                   "seed": int(data.get("seed", 0))}
     trained, _ = load_estimator(path)
-    exported = SwinGarEstimator(**arguments)  # its ValueError names a bad setting
-    exported.load_state_dict(trained.state_dict())
-    write_weights(out, arguments, exported.state_dict(), descriptor)
+    arguments = write_exported_weights(out, network["init_args"], settings,
+                                       trained.state_dict(), descriptor)
     training = {k: v for k, v in saved["hyper_parameters"].items()
                 if k != "estimator" and not k.startswith("_")}
     return {"estimator": arguments, "data": descriptor, "training": training,
             "datamodule": {k: v for k, v in data.items() if not k.startswith("_")},
-            "step": int(saved["global_step"])}
+            "step": int(saved["global_step"]), "set_at_export": dict(settings or {})}
 
 
 def load_body_sdf(checkpoint: str | Path) -> BodySDF:
