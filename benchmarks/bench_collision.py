@@ -53,7 +53,7 @@ from swingar_pyg.collision import (  # noqa: E402
 from swingar_pyg.models.losses import uniform_laplacian  # noqa: E402
 from swingar_pyg.training import load_body_sdf, load_estimator  # noqa: E402
 from swingar_pyg.world.body import AnnyBody  # noqa: E402
-from swingar_pyg.world.sequence_file import read_garment, read_sequence  # noqa: E402
+from swingar_pyg.world.sequence_file import read_garment, read_sequence, sequence_ids  # noqa: E402
 
 METHODS = ("none", "tailornet", "push (exact)", "ours (exact)", "ours (neural)")
 
@@ -67,13 +67,10 @@ def garment_frames(data: Path, checkpoint: str | None, every: int, sequences: in
                    body: AnnyBody):
     """Per test sequence: predicted (or perturbed) and simulated garments at the chosen
     frames, with the posed body."""
-    import h5py
-
     from swingar_pyg.geometry import mesh_edge_index
     from swingar_pyg.inference.prediction import animate, garment_graph
 
-    with h5py.File(data, "r") as file:
-        ids = sorted(file["sequences"])[:sequences]
+    ids = sequence_ids(data)[:sequences]
     estimator = settings = None
     if checkpoint:
         estimator, settings = load_estimator(checkpoint)

@@ -30,6 +30,7 @@ from swingar_pyg.eval.error_vs_time import load_test_sequences
 from swingar_pyg.eval.model_card import labelled_configs, made_split, measure
 from swingar_pyg.training import load_pretrained
 from swingar_pyg.world.body import AnnyBody
+from swingar_pyg.world.sequence_file import sequence_ids
 
 # variant -> the heads whose last layer is zeroed
 VARIANTS = {
@@ -56,12 +57,8 @@ def switched_off(estimator: torch.nn.Module, heads: tuple[str, ...]) -> torch.nn
 def split_sequences(config_path: str, body, stride: int, split: str = "test") -> list:
     """Every ``stride``-th sequence of a split of a dataset config (made beforehand by
     ``make-dataset``), in the order of their ids."""
-    import h5py
-
     _, path = made_split(config_path, split)
-    with h5py.File(path, "r") as file:
-        ids = sorted(file["sequences"])[::stride]
-    return load_test_sequences(path, body, ids=ids)
+    return load_test_sequences(path, body, ids=sequence_ids(path)[::stride])
 
 
 def main() -> None:

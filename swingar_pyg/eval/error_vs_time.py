@@ -31,7 +31,7 @@ from swingar_pyg.sim import VBDSettings, XPBDSettings
 from swingar_pyg.training.vertex_errors import error_stats
 from swingar_pyg.world.motion import Motion
 from swingar_pyg.world.sequence import simulate_sequence
-from swingar_pyg.world.sequence_file import read_garment, read_sequence
+from swingar_pyg.world.sequence_file import read_garment, read_sequence, sequence_ids
 
 
 @dataclass
@@ -54,12 +54,8 @@ class StoredSequences:
     that keep only errors (a base test split posed at once holds gigabytes)."""
 
     def __init__(self, path, body, ids: list[str] | None = None):
-        import h5py
-
-        if ids is None:
-            with h5py.File(path, "r") as file:
-                ids = sorted(file["sequences"])
-        self.path, self.body, self.ids = path, body, list(ids)
+        self.path, self.body = path, body
+        self.ids = sequence_ids(path) if ids is None else list(ids)
 
     def __len__(self) -> int:
         return len(self.ids)
@@ -73,11 +69,8 @@ def load_test_sequences(path, body, limit: int | None = None,
                         ids: list[str] | None = None) -> list[TestSequence]:
     """The sequences of a split file (all, the first ``limit`` or ``ids``),
     with the body posed for each."""
-    import h5py
-
     if ids is None:
-        with h5py.File(path, "r") as file:
-            ids = sorted(file["sequences"])[:limit]
+        ids = sequence_ids(path)[:limit]
     out = []
     for sequence_id in ids:
         stored = read_sequence(path, sequence_id)

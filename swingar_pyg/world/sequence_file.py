@@ -101,6 +101,14 @@ def merge_sequence_files(parts: list[Path], path: str | Path) -> Path:
     return path
 
 
+def sequence_ids(path: str | Path) -> list[str]:
+    """The ids of a file's sequences, sorted."""
+    import h5py
+
+    with h5py.File(path, "r") as file:
+        return sorted(file["sequences"])
+
+
 def read_sequence(path: str | Path, sequence_id: str) -> dict:
     """One sequence of a file as arrays: ``garment_vertices``, ``rigid_vertices``,
     ``rotations``, ``translation``, ``body_shape``, ``faces`` (the garment's), and
