@@ -403,3 +403,65 @@ def test_a_failed_training_run_is_reported_with_its_command(tmp_path):
                       f'data: {{init_args: {{config: {tmp_path / "missing.yaml"}}}}}\n')
     with pytest.raises(RuntimeError, match=r'training under .*run failed \(exit code 1'):
         ensure_checkpoint(('configs/quickstart.yaml', str(config)), 0, True)
+
+
+CHILD_MODULE = """
+import os
+import time
+from pathlib import Path
+
+
+def record_pid_and_sleep(path):
+    Path(path + '.tmp').write_text(str(os.getpid()))
+    os.replace(path + '.tmp', path)
+    time.sleep(120)
+"""
+
+PARENT_SCRIPT = """
+import sys
+from swingar_pyg.eval.report import run_in_child
+import stays_with_parent
+sys.exit(run_in_child(stays_with_parent.record_pid_and_sleep, (sys.argv[1],)))
+"""
+
+
+def _running(pid: int) -> bool:
+    """Whether ``pid`` is a live process (a zombie waiting to be reaped is not)."""
+    status = Path(f'/proc/{pid}/status')
+    try:
+        return 'State:\tZ' not in status.read_text()
+    except FileNotFoundError:
+        return False
+
+
+@pytest.mark.skipif(not Path('/proc').is_dir(), reason='reads process states from /proc')
+def test_a_training_child_ends_when_its_parent_is_terminated(tmp_path):
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    (tmp_path / 'stays_with_parent.py').write_text(CHILD_MODULE)
+    pid_file = tmp_path / 'child.pid'
+    environment = dict(os.environ, PYTHONPATH=os.pathsep.join(
+        [str(tmp_path), str(Path(__file__).parents[1]), os.environ.get('PYTHONPATH', '')]))
+    parent = subprocess.Popen([sys.executable, '-c', PARENT_SCRIPT, str(pid_file)],
+                              env=environment)
+    try:
+        deadline = time.monotonic() + 60
+        while not pid_file.exists() and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert pid_file.exists(), 'the child never started'
+        child = int(pid_file.read_text())
+        assert _running(child)
+        parent.send_signal(signal.SIGTERM)  # to the parent alone, not its process group
+        assert parent.wait(timeout=30) == 128 + signal.SIGTERM
+        deadline = time.monotonic() + 30
+        while _running(child) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not _running(child), 'the child outlived its terminated parent'
+    finally:
+        parent.kill()
+        if pid_file.exists() and _running(int(pid_file.read_text())):
+            os.kill(int(pid_file.read_text()), signal.SIGKILL)

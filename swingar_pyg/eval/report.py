@@ -23,7 +23,10 @@ import hashlib
 import json
 import multiprocessing
 import platform
+import signal
+import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from importlib import metadata
 from pathlib import Path
@@ -246,17 +249,42 @@ def ensure_checkpoint(configs: tuple[str, ...], seed: int, train_missing: bool) 
     # In a process of its own: a finished fit leaves its datamodule (the split in memory,
     # ~8 GB for the base data) referenced, so runs trained one after another in one
     # process would add up.
-    process = multiprocessing.get_context("spawn").Process(
-        target=_fit, args=(arguments, str(last) if last.exists() else None))
-    process.start()
-    process.join()
-    if process.exitcode != 0:
-        raise RuntimeError(f"training under {folder} failed (exit code {process.exitcode}; "
+    exitcode = run_in_child(_fit, (arguments, str(last) if last.exists() else None))
+    if exitcode != 0:
+        raise RuntimeError(f"training under {folder} failed (exit code {exitcode}; "
                            f"its error is printed above): swingar fit {' '.join(arguments)}")
     best = _best_checkpoint(folder)
     if best is None:
         raise ValueError(f"training under {folder} wrote no best checkpoint")
     return best
+
+
+def run_in_child(target: Callable, args: tuple) -> int:
+    """Run ``target(*args)`` in a spawned process and return its exit code.
+
+    The child ends with its parent: an exception in the parent while it waits
+    (Ctrl-C), or a SIGTERM sent to the parent alone (a scheduler's stop, ``kill``), also
+    terminates the child, which would otherwise keep training as an orphan. SIGTERM is
+    turned into :class:`SystemExit` while the child runs (in the main thread only, where
+    Python delivers signals)."""
+    process = multiprocessing.get_context("spawn").Process(target=target, args=args)
+    in_main_thread = threading.current_thread() is threading.main_thread()
+    if in_main_thread:
+        previous = signal.signal(signal.SIGTERM, _exit_on_signal)
+    try:
+        process.start()
+        process.join()
+    finally:
+        if process.is_alive():
+            process.terminate()
+            process.join()
+        if in_main_thread:
+            signal.signal(signal.SIGTERM, previous)
+    return process.exitcode
+
+
+def _exit_on_signal(signum: int, frame) -> None:
+    raise SystemExit(128 + signum)
 
 
 def _fit(arguments: list[str], resume: str | None) -> None:
