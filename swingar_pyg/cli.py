@@ -326,6 +326,11 @@ def build_parser() -> argparse.ArgumentParser:
                              "measure nothing; a later report reuses them. Without the test "
                              "split in memory, seeds can train side by side (--seeds 1, "
                              "--seeds 2)")
+    report.add_argument("--resume", action="store_true",
+                        help="read back the estimator measurements an earlier run of this "
+                             "report stored in <output>/measured/ (same estimator, sequences "
+                             "and settings) instead of measuring them again; the report says "
+                             "which and when")
     report.set_defaults(run=_report)
 
     ship = commands.add_parser(
@@ -364,7 +369,7 @@ def build_parser() -> argparse.ArgumentParser:
                            "report its error and time against rigid skinning and the "
                            "simulator (swingar report -c configs/report/quickstart.yaml)")
     quickstart.set_defaults(run=_report, config="configs/report/quickstart.yaml", seeds=None,
-                            train_only=False)
+                            train_only=False, resume=False)
     return parser
 
 
@@ -424,7 +429,7 @@ def _report(args: argparse.Namespace) -> int:
         for checkpoint in train_runs(config):
             print(checkpoint)
         return 0
-    path = run_report(config)
+    path = run_report(config, resume=args.resume)
     text = path.read_text()
     section = text.split("## Error against run time", 1)[1].split("\n## ", 1)[0]
     print("\nError against run time" + section.replace("![error against run time]"

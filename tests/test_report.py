@@ -465,3 +465,68 @@ def test_a_training_child_ends_when_its_parent_is_terminated(tmp_path):
         parent.kill()
         if pid_file.exists() and _running(int(pid_file.read_text())):
             os.kill(int(pid_file.read_text()), signal.SIGKILL)
+
+
+def test_a_stored_measurement_reads_back_as_measured(tmp_path):
+    from swingar_pyg.eval.error_vs_time import MethodResult
+    from swingar_pyg.eval.measurements import MeasurementStore
+
+    store = MeasurementStore(tmp_path / 'measured')
+    identity = {'source': 'weights a.pt (sha256 0123...)', 'sequences': ['test-00000'],
+                'sigma': 0.1}
+    assert store.load(identity) is None
+    errors = {'test-00000': torch.rand(3, 5)}
+    store.save(identity, MethodResult('tiny', 'estimator', errors, [0.01, 0.02],
+                                      {'precision': 'fp32', 'seed': 1}))
+    result, when = store.load(dict(reversed(identity.items())))  # key order does not count
+    assert (result.name, result.kind, result.seconds) == ('tiny', 'estimator', [0.01, 0.02])
+    assert torch.equal(result.errors['test-00000'], errors['test-00000'])
+    assert result.extra == {'precision': 'fp32', 'seed': 1} and when.endswith('UTC')
+    assert store.load({**identity, 'sigma': 0.2}) is None
+    assert [p.suffix for p in (tmp_path / 'measured').iterdir()] == ['.pt']  # no temp files
+
+
+def test_a_resumed_report_reads_back_what_an_earlier_run_measured(tiny_checkpoint, tiny_windows,
+                                                                   tmp_path, monkeypatch):
+    import swingar_pyg.eval.report as report
+    from swingar_pyg.training import export_weights
+
+    weights = tmp_path / 'tiny.pt'
+    export_weights(tiny_checkpoint, weights)
+    config = report.ReportConfig(
+        name='resumed', output=str(tmp_path / 'report'), dataset=tiny_windows.hparams.config,
+        models=(report.ModelSpec('tiny', (), (0,), ('none',), str(weights)),),
+        simulator_settings=((5, 2),), simulator_sequences=1, streaming_vertices=(),
+        stability='off')
+    measured = []
+    evaluate = report.evaluate_estimator
+
+    def counted(name, *args, **kwargs):
+        measured.append(name)
+        return evaluate(name, *args, **kwargs)
+
+    monkeypatch.setattr(report, 'evaluate_estimator', counted)
+
+    def estimator_row(path):
+        rows = csv.DictReader((path.parent / 'error_vs_time.csv').read_text().splitlines())
+        return next(row for row in rows if row['method'] == 'tiny')
+
+    first = report.run_report(config, progress=False, log=lambda *_: None)
+    assert 'Every figure below was measured in this run, on this machine.' in first.read_text()
+    row = estimator_row(first)
+    assert measured == ['tiny']
+    measured.clear()
+    again = report.run_report(config, progress=False, log=lambda *_: None, resume=True)
+    assert measured == []  # read back, not measured
+    text = again.read_text()
+    assert "except 1 estimator measurement(s) read back with `--resume`" in text
+    assert 'tiny (seed 0), on ' in text
+    assert estimator_row(again) == row
+    assert list(json.loads((again.parent / 'report.json').read_text())['resumed']) == [
+        'tiny (seed 0)']
+    # without --resume it measures again; another estimator is never read back
+    report.run_report(config, progress=False, log=lambda *_: None)
+    assert measured == ['tiny']
+    export_weights(tiny_checkpoint, weights, {'clearance_scale': 0.03})
+    report.run_report(config, progress=False, log=lambda *_: None, resume=True)
+    assert measured == ['tiny', 'tiny']

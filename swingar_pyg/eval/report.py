@@ -33,6 +33,7 @@ from pathlib import Path
 
 import torch
 
+from swingar_pyg import __version__
 from swingar_pyg.atomic import atomic_path
 from swingar_pyg.collision import NeuralCollisions
 from swingar_pyg.eval.error_vs_time import (
@@ -44,6 +45,7 @@ from swingar_pyg.eval.error_vs_time import (
     evaluate_simulator,
     load_test_sequences,
 )
+from swingar_pyg.eval.measurements import MeasurementStore, file_identity
 from swingar_pyg.eval.report_writer import write_report
 from swingar_pyg.eval.stability import FULL, SMALL, run_stability
 from swingar_pyg.eval.stream_speed import stream_speed
@@ -403,18 +405,31 @@ def train_runs(config: ReportConfig, log=print) -> list[str]:
     return trained
 
 
-def run_report(config: ReportConfig, progress: bool = True, log=print) -> Path:
+def run_report(config: ReportConfig, progress: bool = True, log=print,
+               resume: bool = False) -> Path:
     """Measures everything the config asks for and writes the report folder;
-    returns the path of ``report.md``."""
+    returns the path of ``report.md``.
+
+    Each estimator measurement is also stored in ``<output>/measured/``
+    (:class:`~swingar_pyg.eval.measurements.MeasurementStore`); with ``resume`` a
+    measurement stored there by an earlier run of the report, of the same estimator
+    on the same sequences with the same settings, is read back instead of measured
+    again, and the report says which and when."""
     out = Path(config.output)
     started = time.perf_counter()
     body = AnnyBody()
     test_path = _test_split(config.dataset)
     sequences = load_test_sequences(test_path, body, config.test_sequences)
     log(f"test split {test_path}: {len(sequences)} sequences")
-    body_sdf = None
+    store = MeasurementStore(out / "measured")
+    split_identity = {"test_split": file_identity(test_path),
+                      "sequences": [s.id for s in sequences],
+                      "versions": {"swingar_pyg": __version__, "torch": torch.__version__}}
+    body_sdf, body_sdf_source = None, None
     if config.body_sdf is not None and any("neural" in m.collisions for m in config.models):
-        body_sdf = load_body_sdf(ensure_checkpoint(config.body_sdf, 0, config.train_missing))
+        body_sdf_source = ensure_checkpoint(config.body_sdf, 0, config.train_missing)
+        body_sdf = load_body_sdf(body_sdf_source)
+        body_sdf_source = file_identity(body_sdf_source)
     handlers: dict = {}
 
     def neural(shape):
@@ -423,7 +438,7 @@ def run_report(config: ReportConfig, progress: bool = True, log=print) -> Path:
             handlers[key] = NeuralCollisions.for_body(body_sdf, body, shape)
         return handlers[key]
 
-    results, checkpoints, per_model, first_seeds = [], {}, {}, {}
+    results, checkpoints, per_model, first_seeds, resumed = [], {}, {}, {}, {}
     for model in config.models:
         for seed in model.seeds:
             estimator, data, source = model.load(seed, config.train_missing, config.archive)
@@ -435,12 +450,27 @@ def run_report(config: ReportConfig, progress: bool = True, log=print) -> Path:
             variants += [(config.precisions[0], c) for c in model.collisions if c != "none"]
             for precision, pass_ in variants:
                 label = _label(model.name, precision, pass_)
-                log(f"estimator: {label}, seed {seed}")
-                collisions = {"none": None, "exact": "exact", "neural": neural}[pass_]
-                result = evaluate_estimator(label, estimator, sequences,
-                                            data.get("sigma", DESCRIPTOR_SIGMA),
-                                            data.get("seed", 0), precision, collisions, body)
-                result.extra.update(model=model.name, seed=seed, collisions=pass_)
+                # a weights source names its sha256, a checkpoint is its path
+                identity = {**split_identity, "label": label, "source": source,
+                            "checkpoint": (file_identity(source) if Path(source).is_file()
+                                           else None),
+                            "precision": precision, "collisions": pass_,
+                            "body_sdf": body_sdf_source if pass_ == "neural" else None,
+                            "sigma": data.get("sigma", DESCRIPTOR_SIGMA),
+                            "descriptor_seed": data.get("seed", 0)}
+                stored = store.load(identity) if resume else None
+                if stored is not None:
+                    result, resumed[f"{label} (seed {seed})"] = stored
+                    log(f"estimator: {label}, seed {seed}: read back (measured {stored[1]})")
+                else:
+                    log(f"estimator: {label}, seed {seed}")
+                    collisions = {"none": None, "exact": "exact", "neural": neural}[pass_]
+                    result = evaluate_estimator(label, estimator, sequences,
+                                                data.get("sigma", DESCRIPTOR_SIGMA),
+                                                data.get("seed", 0), precision, collisions,
+                                                body)
+                    result.extra.update(model=model.name, seed=seed, collisions=pass_)
+                    store.save(identity, result)
                 if seed == model.seeds[0]:
                     results.append(result)
                 per_model.setdefault(label, []).append(result)
@@ -483,7 +513,7 @@ def run_report(config: ReportConfig, progress: bool = True, log=print) -> Path:
                         rigid=rigid, simulator=simulator, second=second, simulated=chosen,
                         speedups=speedups,
                         streaming=streaming, extra=extra, stability=stability,
-                        checkpoints=checkpoints, body_sdf=body_sdf,
+                        checkpoints=checkpoints, body_sdf=body_sdf, resumed=resumed,
                         seconds=time.perf_counter() - started)
 
 

@@ -233,9 +233,21 @@ def _fmt(stats: dict) -> str:
     return f"{stats['mean_mm']:.1f} / {stats['rmse_mm']:.1f} / {stats['p95_mm']:.1f}"
 
 
+def _provenance(resumed: dict[str, str]) -> str:
+    """Where the figures come from: this run, or for the estimator measurements
+    in ``resumed`` (label -> when) an earlier run of the report (``--resume``)."""
+    if not resumed:
+        return "Every figure below was measured in this run, on this machine."
+    listed = "; ".join(f"{label}, on {when}" for label, when in resumed.items())
+    return (f"Every figure below was measured in this run, on this machine, except "
+            f"{len(resumed)} estimator measurement(s) read back with `--resume` from "
+            f"`measured/`, where an earlier run of this report stored them (their errors and "
+            f"times as measured then): {listed}.")
+
+
 def write_report(out: Path, config, *, machine, test_path, sequences, results, per_model,
                  rigid, simulator, second, simulated, speedups, streaming, extra, stability,
-                 checkpoints, body_sdf, seconds) -> Path:
+                 checkpoints, body_sdf, seconds, resumed=None) -> Path:
     out.mkdir(parents=True, exist_ok=True)
     finest = max(simulator, key=lambda r: r.extra["substeps"] * r.extra["iterations"])
     floor = None
@@ -281,7 +293,7 @@ def write_report(out: Path, config, *, machine, test_path, sequences, results, p
         f"Made by `swingar report -c <config>` (report `{config.name}`) on {machine['date']}, "
         f"{machine['platform']} ({machine['processor']}), Python {machine['python']}, torch "
         f"{machine['versions']['torch']}, {machine['torch_threads']} torch thread(s), in "
-        f"{seconds / 60:.1f} min. Every figure below was measured in this run, on this machine.",
+        f"{seconds / 60:.1f} min. " + _provenance(resumed or {}),
         "",
         f"Test split `{test_path}`: {len(garments)} garment(s) x {len(motions)} motion(s) "
         f"never seen in training, {len(sequences)} sequences, {frames} frames; ground truth "
@@ -407,7 +419,8 @@ def write_report(out: Path, config, *, machine, test_path, sequences, results, p
     _write_text(report, "\n".join(lines))
     payload = {"config": {k: v for k, v in config.__dict__.items() if k != "models"},
                "models": [m.__dict__ for m in config.models], "machine": machine,
-               "test_split": str(test_path), "checkpoints": checkpoints, "body_sdf": body_sdf,
+               "test_split": str(test_path), "checkpoints": checkpoints,
+               "resumed": resumed or {}, "body_sdf": body_sdf,
                "results": rows, "speedups": speedups, "streaming": streaming, "extra": extra,
                "stability": as_dicts(stability), "over_seeds": over_seeds, "seconds": seconds}
     _write_text(out / "report.json", json.dumps(payload, indent=2, default=str))
