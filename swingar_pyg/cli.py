@@ -422,6 +422,9 @@ def _ship_weights(args: argparse.Namespace) -> int:
 def _report(args: argparse.Namespace) -> int:
     from swingar_pyg.eval.report import ReportConfig, run_report, train_runs
 
+    if args.train_only and args.resume:
+        raise ValueError("--resume reads back measurements and --train-only measures nothing: "
+                         "give one of them")
     config = ReportConfig.from_yaml(args.config)
     if args.seeds is not None:
         config = config.with_seeds(tuple(args.seeds))

@@ -1,6 +1,11 @@
 import csv
 import importlib.util
 import json
+import os
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -208,7 +213,7 @@ def test_report_configs_parse_and_bad_ones_are_refused(tmp_path):
         ablations.with_seeds(())
     # a weights entry is measured as shipped: the same network as from_pretrained
     shipped = ReportConfig.from_yaml('configs/report/base.yaml').models[0]
-    estimator, data, source = shipped.load(seed=0, train_missing=False)
+    estimator, data, source, file = shipped.load(seed=0, train_missing=False)
     reference = SwinGarEstimator.from_pretrained(shipped.weights)
     assert source.startswith('weights ') and source.split()[1].endswith('weights/base.pt')
     assert set(data) == {'sigma', 'seed'}
@@ -280,6 +285,9 @@ def test_train_only_trains_every_run_and_measures_nothing(monkeypatch, capsys):
     assert report.train_runs(replace(config.with_seeds((0,)), archive=None),
                              log=lambda _: None) == [
         f'{configs[-1]}@0.ckpt' for configs, _, _ in expected[::2]]
+    with pytest.raises(SystemExit):  # nothing to read back when nothing is measured
+        main(['report', '-c', 'configs/report/ablations_base.yaml', '--train-only', '--resume'])
+    assert '--resume reads back measurements and --train-only' in capsys.readouterr().err
     trained.clear()  # a model measured from weights trains nothing
     assert report.train_runs(report.ReportConfig.from_yaml('configs/report/base.yaml'),
                              log=lambda _: None) == [] and trained == []
@@ -305,7 +313,7 @@ def test_an_archived_run_is_exported_once_and_measured_as_trained(tiny_checkpoin
     monkeypatch.setattr(report, 'ensure_checkpoint', ensure)
     archive = tmp_path / 'archive'
     spec = report.ModelSpec('small', (str(config),), (0, 1))
-    estimator, data, source = spec.load(1, True, str(archive))
+    estimator, data, source, file = spec.load(1, True, str(archive))
     assert trained == [1] and source.startswith(f'weights {archive / "small-seed1.pt"}')
     record = json.loads((archive / 'small-seed1.json').read_text())
     saved = torch.load(tiny_checkpoint, map_location='cpu', weights_only=False)
@@ -419,10 +427,24 @@ def record_pid_and_sleep(path):
 
 PARENT_SCRIPT = """
 import sys
-from swingar_pyg.eval.report import run_in_child
+from swingar_pyg.eval.child_process import run_in_child
 import stays_with_parent
 sys.exit(run_in_child(stays_with_parent.record_pid_and_sleep, (sys.argv[1],)))
 """
+
+
+def test_running_a_child_leaves_the_sigterm_handler_as_it_was():
+    from swingar_pyg.eval.child_process import run_in_child
+
+    def handler(signum, frame):
+        raise AssertionError('not called')
+
+    previous = signal.signal(signal.SIGTERM, handler)
+    try:
+        assert run_in_child(time.sleep, (0,)) == 0
+        assert signal.getsignal(signal.SIGTERM) is handler
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def _running(pid: int) -> bool:
@@ -436,12 +458,6 @@ def _running(pid: int) -> bool:
 
 @pytest.mark.skipif(not Path('/proc').is_dir(), reason='reads process states from /proc')
 def test_a_training_child_ends_when_its_parent_is_terminated(tmp_path):
-    import os
-    import signal
-    import subprocess
-    import sys
-    import time
-
     (tmp_path / 'stays_with_parent.py').write_text(CHILD_MODULE)
     pid_file = tmp_path / 'child.pid'
     environment = dict(os.environ, PYTHONPATH=os.pathsep.join(
@@ -449,7 +465,7 @@ def test_a_training_child_ends_when_its_parent_is_terminated(tmp_path):
     parent = subprocess.Popen([sys.executable, '-c', PARENT_SCRIPT, str(pid_file)],
                               env=environment)
     try:
-        deadline = time.monotonic() + 60
+        deadline = time.monotonic() + 180  # a spawned child imports torch: slow on busy cores
         while not pid_file.exists() and time.monotonic() < deadline:
             time.sleep(0.1)
         assert pid_file.exists(), 'the child never started'
@@ -484,6 +500,12 @@ def test_a_stored_measurement_reads_back_as_measured(tmp_path):
     assert result.extra == {'precision': 'fp32', 'seed': 1} and when.endswith('UTC')
     assert store.load({**identity, 'sigma': 0.2}) is None
     assert [p.suffix for p in (tmp_path / 'measured').iterdir()] == ['.pt']  # no temp files
+    other = {**identity, 'sigma': 0.3}
+    store.save(other, result)
+    store.prune([identity])
+    assert store.load(identity) is not None and not store.path(other).exists()
+    store.path(identity).write_bytes(b'PK\x03\x04 half a file')  # unreadable: measured again
+    assert store.load(identity) is None
 
 
 def test_a_resumed_report_reads_back_what_an_earlier_run_measured(tiny_checkpoint, tiny_windows,
@@ -514,14 +536,15 @@ def test_a_resumed_report_reads_back_what_an_earlier_run_measured(tiny_checkpoin
     first = report.run_report(config, progress=False, log=lambda *_: None)
     assert 'Every figure below was measured in this run, on this machine.' in first.read_text()
     row = estimator_row(first)
-    assert measured == ['tiny']
+    assert measured == ['tiny'] and 'measured_at' not in row
     measured.clear()
     again = report.run_report(config, progress=False, log=lambda *_: None, resume=True)
     assert measured == []  # read back, not measured
     text = again.read_text()
     assert "except 1 estimator measurement(s) read back with `--resume`" in text
     assert 'tiny (seed 0), on ' in text
-    assert estimator_row(again) == row
+    resumed_row = estimator_row(again)
+    assert resumed_row.pop('measured_at').endswith('UTC') and resumed_row == row
     assert list(json.loads((again.parent / 'report.json').read_text())['resumed']) == [
         'tiny (seed 0)']
     # without --resume it measures again; another estimator is never read back

@@ -1,6 +1,7 @@
 """``swingar report -c configs/report/<name>.yaml``: error against run time,
-ablations and the stability suite, measured in one run and written to one
-folder (Markdown, CSV, PNG, JSON).
+ablations and the stability suite, measured in one run (or resumed with
+``--resume``: :mod:`~swingar_pyg.eval.measurements`) and written to one folder
+(Markdown, CSV, PNG, JSON).
 
 The config names a test split (through its dataset config, generated if missing;
 ``extra_tests`` adds other test splits, e.g. a garment type never trained on, evaluated on
@@ -21,10 +22,7 @@ from __future__ import annotations
 import glob
 import hashlib
 import json
-import multiprocessing
 import platform
-import signal
-import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -33,9 +31,9 @@ from pathlib import Path
 
 import torch
 
-from swingar_pyg import __version__
 from swingar_pyg.atomic import atomic_path
 from swingar_pyg.collision import NeuralCollisions
+from swingar_pyg.eval.child_process import run_in_child
 from swingar_pyg.eval.error_vs_time import (
     MethodResult,
     equal_error_speedup,
@@ -45,7 +43,7 @@ from swingar_pyg.eval.error_vs_time import (
     evaluate_simulator,
     load_test_sequences,
 )
-from swingar_pyg.eval.measurements import MeasurementStore, file_identity
+from swingar_pyg.eval.measurements import MeasurementStore, code_fingerprint, file_identity
 from swingar_pyg.eval.report_writer import write_report
 from swingar_pyg.eval.stability import FULL, SMALL, run_stability
 from swingar_pyg.eval.stream_speed import stream_speed
@@ -92,17 +90,17 @@ class ModelSpec:
         return cls(name, (), (0,), tuple(entry.get("collisions", ("none",))), weights)
 
     def load(self, seed: int, train_missing: bool, archive: str | None = None
-             ) -> tuple[SwinGarEstimator, dict, str]:
-        """The estimator of ``seed`` in eval mode, its descriptor settings, and where
+             ) -> tuple[SwinGarEstimator, dict, str, Path]:
+        """The estimator of ``seed`` in eval mode, its descriptor settings, where
         it came from (a checkpoint, trained first if missing, its archived weights
-        when ``archive`` is given, or the model's weights)."""
+        when ``archive`` is given, or the model's weights) and that file."""
         if self.weights is not None or archive is not None:
-            path = (weights_path(self.weights) if self.weights is not None
-                    else archived_run(self.configs, seed, train_missing, archive))
+            path = Path(weights_path(self.weights) if self.weights is not None
+                        else archived_run(self.configs, seed, train_missing, archive))
             digest = weights_sha256(path)[:12]
-            return *load_pretrained(path), f"weights {path} (sha256 {digest}...)"
+            return *load_pretrained(path), f"weights {path} (sha256 {digest}...)", path
         checkpoint = ensure_checkpoint(self.configs, seed, train_missing)
-        return *load_estimator(checkpoint), checkpoint
+        return *load_estimator(checkpoint), checkpoint, Path(checkpoint)
 
 
 @dataclass(frozen=True)
@@ -255,38 +253,13 @@ def ensure_checkpoint(configs: tuple[str, ...], seed: int, train_missing: bool) 
     if exitcode != 0:
         raise RuntimeError(f"training under {folder} failed (exit code {exitcode}; "
                            f"its error is printed above): swingar fit {' '.join(arguments)}")
+    if not (last.exists() and _finished(last, configs)):  # Lightning exits 0 on SIGTERM
+        raise RuntimeError(f"training under {folder} stopped before its max_steps; run the "
+                           "report again to resume it")
     best = _best_checkpoint(folder)
     if best is None:
         raise ValueError(f"training under {folder} wrote no best checkpoint")
     return best
-
-
-def run_in_child(target: Callable, args: tuple) -> int:
-    """Run ``target(*args)`` in a spawned process and return its exit code.
-
-    The child ends with its parent: an exception in the parent while it waits
-    (Ctrl-C), or a SIGTERM sent to the parent alone (a scheduler's stop, ``kill``), also
-    terminates the child, which would otherwise keep training as an orphan. SIGTERM is
-    turned into :class:`SystemExit` while the child runs (in the main thread only, where
-    Python delivers signals)."""
-    process = multiprocessing.get_context("spawn").Process(target=target, args=args)
-    in_main_thread = threading.current_thread() is threading.main_thread()
-    if in_main_thread:
-        previous = signal.signal(signal.SIGTERM, _exit_on_signal)
-    try:
-        process.start()
-        process.join()
-    finally:
-        if process.is_alive():
-            process.terminate()
-            process.join()
-        if in_main_thread:
-            signal.signal(signal.SIGTERM, previous)
-    return process.exitcode
-
-
-def _exit_on_signal(signum: int, frame) -> None:
-    raise SystemExit(128 + signum)
 
 
 def _fit(arguments: list[str], resume: str | None) -> None:
@@ -422,14 +395,15 @@ def run_report(config: ReportConfig, progress: bool = True, log=print,
     sequences = load_test_sequences(test_path, body, config.test_sequences)
     log(f"test split {test_path}: {len(sequences)} sequences")
     store = MeasurementStore(out / "measured")
-    split_identity = {"test_split": file_identity(test_path),
-                      "sequences": [s.id for s in sequences],
-                      "versions": {"swingar_pyg": __version__, "torch": torch.__version__}}
-    body_sdf, body_sdf_source = None, None
+    machine = _machine()
+    run_identity = {"test_split": file_identity(test_path), "sequences": [s.id for s in sequences],
+                    "code": code_fingerprint(), "machine": {k: v for k, v in machine.items()
+                                                            if k != "date"}}
+    body_sdf, body_sdf_sha256 = None, None
     if config.body_sdf is not None and any("neural" in m.collisions for m in config.models):
-        body_sdf_source = ensure_checkpoint(config.body_sdf, 0, config.train_missing)
-        body_sdf = load_body_sdf(body_sdf_source)
-        body_sdf_source = file_identity(body_sdf_source)
+        body_sdf_checkpoint = ensure_checkpoint(config.body_sdf, 0, config.train_missing)
+        body_sdf = load_body_sdf(body_sdf_checkpoint)
+        body_sdf_sha256 = weights_sha256(body_sdf_checkpoint)
     handlers: dict = {}
 
     def neural(shape):
@@ -439,38 +413,35 @@ def run_report(config: ReportConfig, progress: bool = True, log=print,
         return handlers[key]
 
     results, checkpoints, per_model, first_seeds, resumed = [], {}, {}, {}, {}
+    identities = []
     for model in config.models:
         for seed in model.seeds:
-            estimator, data, source = model.load(seed, config.train_missing, config.archive)
+            estimator, data, source, file = model.load(seed, config.train_missing,
+                                                       config.archive)
             checkpoints[f"{model.name} (seed {seed})"] = source
             if seed == model.seeds[0]:
                 first_seeds[model.name] = estimator, data
+            sigma, descriptor_seed = data.get("sigma", DESCRIPTOR_SIGMA), data.get("seed", 0)
             # every precision without collision handling, the collision passes at the first
             variants = [(p, "none") for p in config.precisions if "none" in model.collisions]
             variants += [(config.precisions[0], c) for c in model.collisions if c != "none"]
             for precision, pass_ in variants:
                 label = _label(model.name, precision, pass_)
-                # a weights source names its sha256, a checkpoint is its path
-                identity = {**split_identity, "label": label, "source": source,
-                            "checkpoint": (file_identity(source) if Path(source).is_file()
-                                           else None),
-                            "precision": precision, "collisions": pass_,
-                            "body_sdf": body_sdf_source if pass_ == "neural" else None,
-                            "sigma": data.get("sigma", DESCRIPTOR_SIGMA),
-                            "descriptor_seed": data.get("seed", 0)}
-                stored = store.load(identity) if resume else None
-                if stored is not None:
-                    result, resumed[f"{label} (seed {seed})"] = stored
-                    log(f"estimator: {label}, seed {seed}: read back (measured {stored[1]})")
-                else:
-                    log(f"estimator: {label}, seed {seed}")
-                    collisions = {"none": None, "exact": "exact", "neural": neural}[pass_]
-                    result = evaluate_estimator(label, estimator, sequences,
-                                                data.get("sigma", DESCRIPTOR_SIGMA),
-                                                data.get("seed", 0), precision, collisions,
-                                                body)
-                    result.extra.update(model=model.name, seed=seed, collisions=pass_)
-                    store.save(identity, result)
+                identities.append({
+                    **run_identity, "label": label, "seed": seed,
+                    "model_sha256": weights_sha256(file), "precision": precision,
+                    "collisions": pass_, "sigma": sigma, "descriptor_seed": descriptor_seed,
+                    "body_sdf_sha256": body_sdf_sha256 if pass_ == "neural" else None})
+                collisions = {"none": None, "exact": "exact", "neural": neural}[pass_]
+                log(f"estimator: {label}, seed {seed}")
+                result = _stored_or_measured(
+                    store, identities[-1], resume,
+                    lambda: evaluate_estimator(label, estimator, sequences, sigma,
+                                               descriptor_seed, precision, collisions, body),
+                    {"model": model.name, "seed": seed, "collisions": pass_})
+                if "measured_at" in result.extra:
+                    resumed[f"{label} (seed {seed})"] = result.extra["measured_at"]
+                    log(f"  read back: measured {result.extra['measured_at']}")
                 if seed == model.seeds[0]:
                     results.append(result)
                 per_model.setdefault(label, []).append(result)
@@ -508,13 +479,30 @@ def run_report(config: ReportConfig, progress: bool = True, log=print,
         log("stability suite")
         stability = run_stability(FULL if config.stability == "full" else SMALL,
                                   first_estimator, body_sdf, progress=progress)
-    return write_report(out, config, machine=_machine(), test_path=test_path,
-                        sequences=sequences, results=results, per_model=per_model,
-                        rigid=rigid, simulator=simulator, second=second, simulated=chosen,
-                        speedups=speedups,
-                        streaming=streaming, extra=extra, stability=stability,
-                        checkpoints=checkpoints, body_sdf=body_sdf, resumed=resumed,
-                        seconds=time.perf_counter() - started)
+    report = write_report(out, config, machine=machine, test_path=test_path,
+                          sequences=sequences, results=results, per_model=per_model,
+                          rigid=rigid, simulator=simulator, second=second, simulated=chosen,
+                          speedups=speedups, streaming=streaming, extra=extra,
+                          stability=stability, checkpoints=checkpoints, body_sdf=body_sdf,
+                          resumed=resumed, seconds=time.perf_counter() - started)
+    store.prune(identities)
+    return report
+
+
+def _stored_or_measured(store: MeasurementStore, identity: dict, resume: bool,
+                        measure: Callable[[], MethodResult], extra: dict) -> MethodResult:
+    """The measurement of ``identity``: read back from ``store`` when ``resume``
+    finds it there (``extra["measured_at"]`` says when it was measured), else
+    ``measure()`` now, with ``extra`` added, and stored."""
+    stored = store.load(identity) if resume else None
+    if stored is not None:
+        result, measured_at = stored
+        result.extra["measured_at"] = measured_at
+        return result
+    result = measure()
+    result.extra.update(extra)
+    store.save(identity, result)
+    return result
 
 
 def _label(name: str, precision: str, collisions: str) -> str:

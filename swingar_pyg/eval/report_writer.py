@@ -241,8 +241,10 @@ def _provenance(resumed: dict[str, str]) -> str:
     listed = "; ".join(f"{label}, on {when}" for label, when in resumed.items())
     return (f"Every figure below was measured in this run, on this machine, except "
             f"{len(resumed)} estimator measurement(s) read back with `--resume` from "
-            f"`measured/`, where an earlier run of this report stored them (their errors and "
-            f"times as measured then): {listed}.")
+            f"`measured/`, where an earlier run of this report stored them: {listed}. Their "
+            "errors and times are as measured then, by the same code on the same machine "
+            "and torch threads, but under that run's load; their equal-error speed-ups "
+            "set those times against this run's simulator times (`measured_at` in the CSV).")
 
 
 def write_report(out: Path, config, *, machine, test_path, sequences, results, per_model,
