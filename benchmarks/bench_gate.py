@@ -5,11 +5,13 @@ Each learned term of vertex :math:`i` (skinning logits, blend shape, detail corr
 scaled by
 
 .. math::
-    g_i = 1 - \\exp\\left(-\\max(c_i - c_0, 0) / d_0\\right),
+    g_i = \\left(1 - e^{-\\max(c_i - c_0, 0) / d_0}\\right)\\left(1 - e^{-a_i / l_0}\\right),
 
 with :math:`c_i` its rest clearance from the body, :math:`c_0` the clearance of cloth lying
-on the body and :math:`d_0` the scale over which the terms fade in
-(``SwinGarEstimator(clearance_scale=d_0, contact_clearance=c_0)``). The gate holds no
+on the body, :math:`d_0` the scale over which the terms fade in with room, :math:`a_i` the
+cloth's length along the mesh to where it lies on the body and :math:`l_0` the scale over
+which they fade in with it (``SwinGarEstimator(clearance_scale=d_0, contact_clearance=c_0,
+anchor_scale=l_0)``, :mod:`swingar_pyg.models.clearance_gate`). The gate holds no
 parameters, so one set of weights is measured under each gate: what close-fitting cloth gains
 against what the free-swinging families lose. The base data's val split holds a skirt and a
 t-shirt; ``configs/data/gate_val.yaml`` adds close-fitting tops and a loose jumpsuit that
@@ -35,22 +37,35 @@ from swingar_pyg.world.body import AnnyBody
 
 
 def parse_gate(text: str) -> dict:
-    """``none`` or ``C0:D0`` (millimetres) → the estimator's gate arguments."""
+    """``none`` or ``C0:D0[:L0]`` (millimetres; ``-`` for no D0) → the estimator's gate
+    arguments."""
     if text == "none":
-        return {"clearance_scale": None, "contact_clearance": 0.0}
-    contact, _, scale = text.partition(":")
+        return {"clearance_scale": None, "contact_clearance": 0.0, "anchor_scale": None}
+    parts = text.split(":")
     try:
-        return {"clearance_scale": float(scale) / 1000, "contact_clearance": float(contact) / 1000}
+        if len(parts) not in (2, 3):
+            raise ValueError
+        contact, scale, anchor = (parts + ["-"])[:3]
+        gate = {"clearance_scale": None if scale == "-" else float(scale) / 1000,
+                "contact_clearance": float(contact) / 1000,
+                "anchor_scale": None if anchor == "-" else float(anchor) / 1000}
     except ValueError:
         raise argparse.ArgumentTypeError(
-            f"expected 'none' or C0:D0 in millimetres, got {text!r}") from None
+            f"expected 'none' or C0:D0[:L0] in millimetres ('-' for none), got {text!r}"
+        ) from None
+    if gate["clearance_scale"] is None and gate["anchor_scale"] is None:
+        raise argparse.ArgumentTypeError(f"{text!r} sets no scale: write 'none'")
+    return gate
 
 
 def gate_label(gate: dict) -> str:
     """The inverse of :func:`parse_gate`."""
-    if gate["clearance_scale"] is None:
+    if gate["clearance_scale"] is None and gate.get("anchor_scale") is None:
         return "none"
-    return f"{1000 * gate['contact_clearance']:g}:{1000 * gate['clearance_scale']:g}"
+    scales = [gate["clearance_scale"], gate.get("anchor_scale")]
+    text = ":".join("-" if v is None else f"{1000 * v:g}"
+                    for v in [gate["contact_clearance"]] + scales)
+    return text.removesuffix(":-")
 
 
 def main() -> None:
@@ -67,7 +82,8 @@ def main() -> None:
                         help="every k-th sequence of each split (default: all)")
     parser.add_argument("--gates", nargs="+", type=parse_gate,
                         default=[parse_gate(g) for g in ("none", "6:10", "6:30")],
-                        help="'none' or C0:D0, the contact clearance and scale in mm")
+                        help="'none' or C0:D0[:L0] in mm: the contact clearance, the clearance "
+                             "scale and the anchor scale ('-' leaves a scale out)")
     parser.add_argument("--name", default="bench_gate")
     args = parser.parse_args()
     if args.stride < 1:
@@ -107,11 +123,10 @@ def main() -> None:
         axis.plot(range(len(gates)), [figures[g][label][family]["mean_ratio"] for g in gates],
                   marker="o", label=family if label == "data" else f"{label}: {family}")
     axis.axhline(1.0, color="black", lw=0.8)
-    axis.set_xticks(range(len(gates)), [g if g == "none" else f"c0 {g.replace(':', ', d0 ')}"
-                                        for g in gates], rotation=30, ha="right")
+    axis.set_xticks(range(len(gates)), gates, rotation=30, ha="right")
     axis.set(yscale="log", ylabel="mean error / rigid skinning's",
              title=f"clearance gate on {Path(args.weights).name}, {args.split} splits "
-                   "(c0, d0 in mm)")
+                   "(c0:d0[:l0] in mm)")
     axis.grid(alpha=0.3, which="both")
     axis.legend(fontsize=7, loc="upper right")
     write_results(args.name, {"machine": machine_info(), "weights": str(args.weights),

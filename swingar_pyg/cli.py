@@ -361,6 +361,10 @@ def build_parser() -> argparse.ArgumentParser:
                       help="with a clearance scale (--clearance-scale, or the one --weights "
                            "carry): the rest clearance of cloth lying on the body, skinned "
                            "rigidly (e.g. 0.006, the dressing clearance)")
+    ship.add_argument("--anchor-scale", type=_positive_metres, default=None, metavar="M",
+                      help="also fade the learned terms in over M metres of cloth, along the "
+                           "mesh, from where the garment lies on the body (SwinGarEstimator's "
+                           "anchor_scale)")
     ship.add_argument("--out-dir", default=None, help="default: swingar_pyg/weights")
     ship.set_defaults(run=_ship_weights)
 
@@ -383,7 +387,7 @@ def _predict(args: argparse.Namespace) -> int:
     else:
         estimator, data_settings = load_pretrained(args.weights or "base")
     if not args.clearance_gate:
-        estimator.clearance_scale = None
+        estimator.clearance_scale = estimator.anchor_scale = None
     body_sdf = load_body_sdf(args.body_sdf) if args.body_sdf else None
     summary = predict_to_folder(estimator, args.garment, args.motion, args.out,
                                 args.body_shape, args.seconds, args.preview,
@@ -410,7 +414,8 @@ def _ship_weights(args: argparse.Namespace) -> int:
 
     extra = labelled_configs(args.extra_test, "--extra-test")
     settings = {key: value for key, value in (("clearance_scale", args.clearance_scale),
-                                              ("contact_clearance", args.contact_clearance))
+                                              ("contact_clearance", args.contact_clearance),
+                                              ("anchor_scale", args.anchor_scale))
                 if value is not None}
     card = ship_weights(args.ckpt, args.name, args.data, extra, args.training_command,
                         args.out_dir or WEIGHTS_DIR, settings=settings, weights=args.weights)

@@ -67,8 +67,8 @@ def test_predict_without_a_checkpoint_uses_the_shipped_model(tmp_path, capsys):
     assert 'estimator' in capsys.readouterr().out
     summary = json.loads((out / 'summary.json').read_text())
     assert summary['checkpoint'] == 'weights: base'
-    assert summary['clearance_gate'] == {k: _card()['estimator'][k]
-                                         for k in ('clearance_scale', 'contact_clearance')}
+    assert summary['clearance_gate'] == {k: _card()['estimator'].get(k) for k in (
+        'clearance_scale', 'contact_clearance', 'anchor_scale')}
     vertices = torch.as_tensor(np.load(out / 'garment.npz')['vertices'])
     assert vertices.shape == (30, skirt.mesh.num_vertices, 3) and torch.isfinite(vertices).all()
     # near the body: each vertex within 10 cm of where it stands off the rest body (the

@@ -168,9 +168,11 @@ def predict_to_folder(estimator: SwinGarEstimator, garment: str, motion: str, ou
                "exported": exported,
                "estimator_ms_per_frame": 1e3 * sum(result.stage(n).seconds for n in network) /
                len(vertices), "checkpoint": checkpoint,
-               "clearance_gate": None if estimator.clearance_scale is None else {
+               "clearance_gate": {
                    "clearance_scale": estimator.clearance_scale,
-                   "contact_clearance": estimator.contact_clearance},
+                   "contact_clearance": estimator.contact_clearance,
+                   "anchor_scale": estimator.anchor_scale}
+               if estimator.clearance_scale or estimator.anchor_scale else None,
                "collisions": collision_counts,
                "stages": [dataclasses.asdict(stage) for stage in result.stages]}
     with atomic_path(out / "summary.json") as tmp:

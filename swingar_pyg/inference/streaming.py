@@ -60,7 +60,7 @@ class SwinGarStream:
         history = estimator.history
         with torch.no_grad():
             edge_index, self.features, self.shape_code = estimator.encode_garment(garment)
-        self.gate = estimator.clearance_gate(garment.fit)
+        self.gate = estimator.clearance_gate(garment.fit, garment.edge_index, garment.rest)
         # EdgeIndex does not trace; compiled code gets the plain tensor.
         self.edge_index = edge_index.as_tensor() if compile else edge_index
         self._rotations: deque[Tensor] = deque(maxlen=history + 1)

@@ -36,10 +36,13 @@ clearance :math:`c_i` (the garment's ``fit``),
 
 so cloth lying on the body (no more than the ``contact_clearance`` :math:`c_0`
 from it) is rigidly skinned whatever the network predicts, and the learned terms
-fade in over the next :math:`d_0` of room. The gate holds no parameters: it can be
-set on an estimator trained without it (``swingar ship-weights --clearance-scale``),
-which guards the close-fitting cloth more strictly than training with it, where
-the network learns to push against it.
+fade in over the next :math:`d_0` of room. With an ``anchor_scale`` :math:`l_0` the gate
+also fades the terms in with the cloth's distance along the mesh from where it
+lies on the body (:mod:`~swingar_pyg.models.clearance_gate`), so cloth held by
+close-fitting neighbours is skinned rigidly too. The gate holds no parameters: it
+can be set on an estimator trained without it (``swingar ship-weights
+--clearance-scale --anchor-scale``), which guards the close-fitting cloth more
+strictly than training with it, where the network learns to push against it.
 Positions fed to :math:`M_d` and its correction are in the canonical frame
 (:mod:`~swingar_pyg.models.pose_features`) of their own frame, so the correction
 turns with the body and a frame's input to :math:`M_d` is the same in every window
@@ -55,6 +58,7 @@ import torch
 from torch import Tensor, nn
 from torch_geometric.utils import add_remaining_self_loops
 
+from swingar_pyg.models.clearance_gate import clearance_gate
 from swingar_pyg.models.pose_features import pose_feature_size
 from swingar_pyg.models.pretrained import read_weights
 from swingar_pyg.nn import FCALSTM, FCAStack, attention_edge_index
@@ -136,6 +140,10 @@ class SwinGarEstimator(nn.Module):
             clearance of cloth lying on the body, e.g. the dressing clearance
             of :func:`~swingar_pyg.world.garment.garment_on_body`.
             (default: :obj:`0.0`)
+        anchor_scale (float, optional): :math:`l_0` in metres, the length of
+            cloth from where the garment lies on the body over which the learned
+            terms fade in (needs the skinning prior); :obj:`None` leaves that
+            factor out. (default: :obj:`None`)
     """
 
     def __init__(self, num_joints: int = 31, shape_size: int = 6, channels: int = 64,
@@ -144,16 +152,18 @@ class SwinGarEstimator(nn.Module):
                  descriptor_size: int | None = 256, history: int = 64,
                  skinning_prior: bool = True, detail: bool = True,
                  detail_channels: int = 32, clearance_scale: float | None = None,
-                 contact_clearance: float = 0.0):
+                 contact_clearance: float = 0.0, anchor_scale: float | None = None):
         super().__init__()
         if history < 1:
             raise ValueError(f"the pose history needs at least one frame, got {history}")
-        if clearance_scale is not None:
-            if not 0.0 < clearance_scale < float("inf"):
-                raise ValueError(f"clearance_scale must be finite positive metres, "
-                                 f"got {clearance_scale}")
+        for name, scale in (("clearance_scale", clearance_scale),
+                            ("anchor_scale", anchor_scale)):
+            if scale is None:
+                continue
+            if not 0.0 < scale < float("inf"):
+                raise ValueError(f"{name} must be finite positive metres, got {scale}")
             if not skinning_prior:
-                raise ValueError("clearance_scale fades the learned terms into rigid skinning "
+                raise ValueError(f"{name} fades the learned terms into rigid skinning "
                                  "and needs skinning_prior=True")
         if not 0.0 <= contact_clearance < float("inf"):
             raise ValueError(f"contact_clearance must be finite metres >= 0, "
@@ -164,6 +174,7 @@ class SwinGarEstimator(nn.Module):
         self.skinning_prior = skinning_prior
         self.clearance_scale = clearance_scale
         self.contact_clearance = contact_clearance
+        self.anchor_scale = anchor_scale
         pose_size = pose_feature_size(num_joints)
         stack = dict(heads=heads, alpha=alpha, normalize=normalize, add_self_loops=False)
         self.garment_encoder = FCAStack(7, channels, garment_layers, **stack)
@@ -219,13 +230,14 @@ class SwinGarEstimator(nn.Module):
             shape_code = self.shape_parser(descriptor_features(data.descriptor))[batch_vector(data)]
         return edge_index, features, shape_code
 
-    def clearance_gate(self, fit: Tensor) -> Tensor | None:
-        """:math:`g` ``(N, 1)`` of the rest clearances ``fit`` ``(N,)``, or
-        :obj:`None` without a ``clearance_scale``."""
-        if self.clearance_scale is None:
-            return None
-        room = (fit - self.contact_clearance).clamp_min(0.0)
-        return -torch.expm1(-room / self.clearance_scale).unsqueeze(-1)
+    def clearance_gate(self, fit: Tensor, edge_index: Tensor | None = None,
+                       rest: Tensor | None = None) -> Tensor | None:
+        """:math:`g` ``(N, 1)`` of the rest clearances ``fit`` ``(N,)``
+        (:func:`~swingar_pyg.models.clearance_gate.clearance_gate`), or :obj:`None`
+        without a ``clearance_scale`` or an ``anchor_scale``; the anchor factor
+        needs the garment's mesh ``edge_index`` and ``rest`` positions."""
+        return clearance_gate(fit, self.contact_clearance, self.clearance_scale,
+                              self.anchor_scale, edge_index, rest)
 
     def motion_codes(self, pose_history: Tensor, history_mask: Tensor) -> Tensor:
         """:math:`M_m`: ``(G, F, m, P)`` windows and masks ``(G, F, m)`` → ``(G, F, C)``."""
@@ -311,7 +323,7 @@ class SwinGarEstimator(nn.Module):
         edge_index, features, shape_code = self.encode_garment(data)
         motion = self.motion_codes(data.pose_history, data.history_mask)
         batch = batch_vector(data)
-        gate = self.clearance_gate(data.fit)
+        gate = self.clearance_gate(data.fit, data.edge_index, data.rest)
         terms = [self.skinning_terms(data, edge_index, features, shape_code, motion[:, k], gate)
                  for k in range(TARGET_FRAMES)]
         blend = torch.stack([offsets for _, offsets in terms])

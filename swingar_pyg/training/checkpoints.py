@@ -41,7 +41,7 @@ def load_pretrained(name_or_path: str | Path = "base") -> tuple[SwinGarEstimator
 
 #: Estimator arguments that hold no parameters and may be set on a trained
 #: network when it is exported: the clearance gate.
-EXPORT_SETTINGS = ("clearance_scale", "contact_clearance")
+EXPORT_SETTINGS = ("clearance_scale", "contact_clearance", "anchor_scale")
 
 
 def write_exported_weights(out: str | Path, arguments: dict, settings: dict | None,
@@ -56,8 +56,10 @@ def write_exported_weights(out: str | Path, arguments: dict, settings: dict | No
         raise ValueError(f"only {', '.join(EXPORT_SETTINGS)} can be set at export, "
                          f"got {', '.join(sorted(unknown))}")
     arguments = {**arguments, **(settings or {})}
-    if arguments.get("clearance_scale") is None and arguments.get("contact_clearance"):
-        raise ValueError("a contact_clearance does nothing without a clearance_scale")
+    if (arguments.get("clearance_scale") is None and arguments.get("anchor_scale") is None
+            and arguments.get("contact_clearance")):
+        raise ValueError("a contact_clearance does nothing without a clearance_scale or an "
+                         "anchor_scale")
     exported = SwinGarEstimator(**arguments)  # its ValueError names a bad setting
     exported.load_state_dict(state_dict)
     write_weights(out, arguments, exported.state_dict(), data_settings)
