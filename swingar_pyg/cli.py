@@ -172,6 +172,12 @@ def _positive_metres(text: str) -> float:
     return value
 
 
+def _scale_or_none(text: str) -> float | str:
+    """An argparse type: a finite length in metres above zero, or ``none`` (a
+    gate factor left out)."""
+    return "none" if text == "none" else _positive_metres(text)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="swingar",
@@ -353,18 +359,19 @@ def build_parser() -> argparse.ArgumentParser:
                       help="another dataset config whose test split is measured (repeatable)")
     ship.add_argument("--command", dest="training_command", default=None,
                       help="the training command, for the card")
-    ship.add_argument("--clearance-scale", type=_positive_metres, default=None, metavar="M",
+    ship.add_argument("--clearance-scale", type=_scale_or_none, default=None, metavar="M",
                       help="set the estimator's clearance gate on the trained network: "
                            "learned terms fade in over M metres of rest clearance "
-                           "(SwinGarEstimator's clearance_scale)")
+                           "(SwinGarEstimator's clearance_scale; 'none' leaves that factor "
+                           "out)")
     ship.add_argument("--contact-clearance", type=_metres, default=None, metavar="M",
                       help="with a clearance scale (--clearance-scale, or the one --weights "
                            "carry): the rest clearance of cloth lying on the body, skinned "
                            "rigidly (e.g. 0.006, the dressing clearance)")
-    ship.add_argument("--anchor-scale", type=_positive_metres, default=None, metavar="M",
-                      help="also fade the learned terms in over M metres of cloth, along the "
-                           "mesh, from where the garment lies on the body (SwinGarEstimator's "
-                           "anchor_scale)")
+    ship.add_argument("--anchor-scale", type=_scale_or_none, default=None, metavar="M",
+                      help="fade the learned terms in over M metres of cloth, along the mesh, "
+                           "from where the garment lies on the body (SwinGarEstimator's "
+                           "anchor_scale; 'none' leaves that factor out)")
     ship.add_argument("--out-dir", default=None, help="default: swingar_pyg/weights")
     ship.set_defaults(run=_ship_weights)
 
@@ -413,9 +420,9 @@ def _ship_weights(args: argparse.Namespace) -> int:
     from swingar_pyg.models.pretrained import WEIGHTS_DIR
 
     extra = labelled_configs(args.extra_test, "--extra-test")
-    settings = {key: value for key, value in (("clearance_scale", args.clearance_scale),
-                                              ("contact_clearance", args.contact_clearance),
-                                              ("anchor_scale", args.anchor_scale))
+    given = (("clearance_scale", args.clearance_scale),
+             ("contact_clearance", args.contact_clearance), ("anchor_scale", args.anchor_scale))
+    settings = {key: None if value == "none" else value for key, value in given
                 if value is not None}
     card = ship_weights(args.ckpt, args.name, args.data, extra, args.training_command,
                         args.out_dir or WEIGHTS_DIR, settings=settings, weights=args.weights)

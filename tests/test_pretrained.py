@@ -177,6 +177,10 @@ def test_ship_weights_cli_passes_the_gate_on(tmp_path, monkeypatch, capsys):
         main(['ship-weights', '--weights', 'base', '--name', 'x', '--data', str(data),
               '--clearance-scale', '0.03', '--out-dir', str(tmp_path)])
     assert received['weights'] == 'base' and received['settings'] == {'clearance_scale': 0.03}
+    with pytest.raises(SystemExit):  # a factor left out, another set
+        main(['ship-weights', '--weights', 'base', '--name', 'x', '--data', str(data),
+              '--clearance-scale', 'none', '--anchor-scale', '0.3', '--out-dir', str(tmp_path)])
+    assert received['settings'] == {'clearance_scale': None, 'anchor_scale': 0.3}
     with pytest.raises(SystemExit):
         main(['ship-weights', '--ckpt', 'x.ckpt', '--weights', 'base', '--name', 'x', '--data',
               str(data), '--out-dir', str(tmp_path)])
