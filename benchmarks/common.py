@@ -44,9 +44,10 @@ def machine_info() -> dict[str, Any]:
 
 def clearance_gate(estimator: torch.nn.Module) -> dict[str, float | None]:
     """The clearance gate a trained estimator runs with, stored with its figures: shipped
-    weights may carry one (``swingar ship-weights --clearance-scale``)."""
+    weights may carry one (``swingar ship-weights --clearance-scale --anchor-scale``)."""
     return {"clearance_scale": estimator.clearance_scale,
-            "contact_clearance": estimator.contact_clearance}
+            "contact_clearance": estimator.contact_clearance,
+            "anchor_scale": estimator.anchor_scale}
 
 
 def median_seconds(function: Callable[[], Any], repeats: int, warmup: int = 1) -> float:

@@ -314,9 +314,9 @@ def build_parser() -> argparse.ArgumentParser:
                               "`swingar fit -c configs/body_sdf.yaml`) instead of the exact, "
                               "slower mesh SDF")
     predict.add_argument("--no-clearance-gate", dest="clearance_gate", action="store_false",
-                         help="apply the learned terms to cloth lying on the body too (the "
-                              "weights' clearance gate skins it rigidly): for loose cloth "
-                              "near the body, e.g. a t-shirt")
+                         help="apply the learned terms to cloth lying on the body and to "
+                              "cloth held by it too (the weights' clearance gate fades them "
+                              "out there)")
     predict.set_defaults(run=_predict)
 
     report = commands.add_parser(
@@ -365,7 +365,7 @@ def build_parser() -> argparse.ArgumentParser:
                            "(SwinGarEstimator's clearance_scale; 'none' leaves that factor "
                            "out)")
     ship.add_argument("--contact-clearance", type=_metres, default=None, metavar="M",
-                      help="with a clearance scale (--clearance-scale, or the one --weights "
+                      help="with a clearance or anchor scale (given, or the ones --weights "
                            "carry): the rest clearance of cloth lying on the body, skinned "
                            "rigidly (e.g. 0.006, the dressing clearance)")
     ship.add_argument("--anchor-scale", type=_scale_or_none, default=None, metavar="M",

@@ -146,12 +146,17 @@ def test_batch_equals_each_garment_alone(tiny_windows):
     assert torch.allclose(together, alone, atol=1e-5)
 
 
-@pytest.mark.parametrize('options', [{}, {'detail': False}, {'clearance_scale': 0.02}])
+@pytest.mark.parametrize('options', [{}, {'detail': False}, {'clearance_scale': 0.02},
+                                     {'anchor_scale': 0.05}])
 def test_stream_equals_the_windowed_estimator(tiny_windows, options):
     dataset = tiny_windows.datasets['test']
     sequence = dataset.sequences[0]
-    model = trained_like(**options)
     window = dataset[0]
+    if 'anchor_scale' in options:  # the cloth nearer the body than its median anchors the rest
+        options = {**options, 'contact_clearance': float(window.fit.median())}
+        gate = trained_like(**options).clearance_gate(window.fit, window.edge_index, window.rest)
+        assert (gate == 0).any() and (gate > 0.5).any()
+    model = trained_like(**options)
     stream = SwinGarStream(model, window, sequence.body_shape, sequence.fps)
     with torch.no_grad():
         for t in range(len(sequence.target)):

@@ -325,11 +325,11 @@ def test_predict_switches_the_clearance_gate_off_on_request(tmp_path, monkeypatc
     used = []
 
     def recorded(estimator, *args, **kwargs):
-        used.append(estimator.clearance_scale)
+        used.append((estimator.clearance_scale, estimator.anchor_scale))
         raise SystemExit(0)
 
     monkeypatch.setattr(cli, 'predict_to_folder', recorded)
     for options in ([], ['--no-clearance-gate']):
         with pytest.raises(SystemExit):
             cli.main(['predict', '--garment', 'tshirt_loose', '--out', str(tmp_path), *options])
-    assert used[0] is not None and used[1] is None  # the shipped weights carry a gate
+    assert used[0] != (None, None) and used[1] == (None, None)  # the shipped weights' gate

@@ -128,6 +128,17 @@ def test_ship_weights_writes_weights_and_a_card_that_re_measures(tiny_checkpoint
     assert regated_card['sha256'] != card['sha256'] and 'exported_from' not in card
     assert regated_card['figures']['test']['all']['rigid_mean_mm'] == test['all']['rigid_mean_mm']
     assert f"sha256 `{card['sha256'][:16]}" in (tmp_path / 'tiny.md').read_text()
+    # the clearance factor left out, the anchor factor set: both carried by file and card
+    anchored_path = ship_weights(None, 'tiny', tiny_windows.hparams.config, out_dir=tmp_path,
+                                 check_slice=TINY_CHECK_SLICE, progress=False,
+                                 settings={'clearance_scale': None, 'anchor_scale': 0.3},
+                                 weights=tmp_path / 'tiny.pt')
+    anchored, _ = load_pretrained(tmp_path / 'tiny.pt')
+    assert (anchored.clearance_scale, anchored.contact_clearance, anchored.anchor_scale) == (
+        None, 0.006, 0.3)
+    assert json.loads(anchored_path.read_text())['set_at_export'] == {
+        'clearance_scale': None, 'contact_clearance': 0.006, 'anchor_scale': 0.3}
+    assert '"anchor_scale": 0.3' in (tmp_path / 'tiny.md').read_text()
 
 
 def test_ship_weights_cli_refuses_bad_arguments_before_any_work(tmp_path, capsys):
@@ -239,6 +250,7 @@ def test_ship_weights_leaves_nothing_when_it_fails(tiny_checkpoint, tiny_windows
                      weights=bare / 'base.pt')
     for settings, message in (({'channels': 8}, 'only clearance_scale, contact_clearance'),
                               ({'contact_clearance': 0.006}, 'does nothing without a'),
+                              ({'anchor_scale': 0.3}, 'needs its contact_clearance'),
                               ({'clearance_scale': float('inf')}, 'finite positive metres')):
         with pytest.raises(ValueError, match=message):
             ship_weights(tiny_checkpoint, 'tiny', tiny_windows.hparams.config, out_dir=out,

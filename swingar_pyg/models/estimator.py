@@ -39,7 +39,7 @@ from it) is rigidly skinned whatever the network predicts, and the learned terms
 fade in over the next :math:`d_0` of room. With an ``anchor_scale`` :math:`l_0` the gate
 also fades the terms in with the cloth's distance along the mesh from where it
 lies on the body (:mod:`~swingar_pyg.models.clearance_gate`), so cloth held by
-close-fitting neighbours is skinned rigidly too. The gate holds no parameters: it
+close-fitting neighbours is faded towards rigid skinning too. The gate holds no parameters: it
 can be set on an estimator trained without it (``swingar ship-weights
 --clearance-scale --anchor-scale``), which guards the close-fitting cloth more
 strictly than training with it, where the network learns to push against it.
@@ -135,15 +135,18 @@ class SwinGarEstimator(nn.Module):
             (default: :obj:`32`)
         clearance_scale (float, optional): :math:`d_0` in metres, the rest
             clearance over which the learned terms fade in (needs the skinning
-            prior); :obj:`None` applies them everywhere. (default: :obj:`None`)
+            prior); :obj:`None` leaves that factor out. (default: :obj:`None`)
         contact_clearance (float, optional): :math:`c_0` in metres, the rest
             clearance of cloth lying on the body, e.g. the dressing clearance
             of :func:`~swingar_pyg.world.garment.garment_on_body`.
             (default: :obj:`0.0`)
         anchor_scale (float, optional): :math:`l_0` in metres, the length of
             cloth from where the garment lies on the body over which the learned
-            terms fade in (needs the skinning prior); :obj:`None` leaves that
-            factor out. (default: :obj:`None`)
+            terms fade in (needs the skinning prior and a positive
+            ``contact_clearance``); :obj:`None` leaves that factor out. Without
+            either scale the learned terms apply everywhere. It is computed anew
+            on every :meth:`forward`: set it on a trained network, for inference.
+            (default: :obj:`None`)
     """
 
     def __init__(self, num_joints: int = 31, shape_size: int = 6, channels: int = 64,
@@ -168,6 +171,10 @@ class SwinGarEstimator(nn.Module):
         if not 0.0 <= contact_clearance < float("inf"):
             raise ValueError(f"contact_clearance must be finite metres >= 0, "
                              f"got {contact_clearance}")
+        if anchor_scale is not None and contact_clearance == 0.0:
+            raise ValueError("anchor_scale fades the terms in from cloth lying on the body and "
+                             "needs its contact_clearance (e.g. 0.006, the dressing clearance "
+                             "of garment_on_body): at 0 no dressed vertex lies on the body")
         self.num_joints = num_joints
         self.descriptor_size = descriptor_size
         self.history = history

@@ -49,8 +49,8 @@ def write_exported_weights(out: str | Path, arguments: dict, settings: dict | No
     """Writes a trained network (its init ``arguments`` and ``state_dict``) as a
     weights file with its :data:`EXPORT_SETTINGS` replaced by ``settings``, and
     returns the arguments written. Raises ``ValueError`` on any other setting, on a
-    contact clearance without a clearance scale and on a setting the estimator
-    refuses."""
+    contact clearance without a clearance or anchor scale and on a setting the
+    estimator refuses."""
     unknown = set(settings or {}) - set(EXPORT_SETTINGS)
     if unknown:
         raise ValueError(f"only {', '.join(EXPORT_SETTINGS)} can be set at export, "
