@@ -13,6 +13,7 @@ import pytest
 import torch
 
 from swingar_pyg.models import SwinGarEstimator
+from swingar_pyg.models.pretrained import weights_sha256
 from tests.extras import in_ci, require
 from tests.windows import SMALL_ESTIMATOR, SMALL_FEATURES
 
@@ -213,9 +214,10 @@ def test_report_configs_parse_and_bad_ones_are_refused(tmp_path):
         ablations.with_seeds(())
     # a weights entry is measured as shipped: the same network as from_pretrained
     shipped = ReportConfig.from_yaml('configs/report/base.yaml').models[0]
-    estimator, data, source, file = shipped.load(seed=0, train_missing=False)
+    estimator, data, source, digest = shipped.load(seed=0, train_missing=False)
     reference = SwinGarEstimator.from_pretrained(shipped.weights)
     assert source.startswith('weights ') and source.split()[1].endswith('weights/base.pt')
+    assert digest == weights_sha256(source.split()[1])  # the file measured, hashed once
     assert set(data) == {'sigma', 'seed'}
     for name, value in reference.state_dict().items():
         assert torch.equal(estimator.state_dict()[name], value), name
@@ -313,7 +315,7 @@ def test_an_archived_run_is_exported_once_and_measured_as_trained(tiny_checkpoin
     monkeypatch.setattr(report, 'ensure_checkpoint', ensure)
     archive = tmp_path / 'archive'
     spec = report.ModelSpec('small', (str(config),), (0, 1))
-    estimator, data, source, file = spec.load(1, True, str(archive))
+    estimator, data, source, digest = spec.load(1, True, str(archive))
     assert trained == [1] and source.startswith(f'weights {archive / "small-seed1.pt"}')
     record = json.loads((archive / 'small-seed1.json').read_text())
     saved = torch.load(tiny_checkpoint, map_location='cpu', weights_only=False)

@@ -90,17 +90,17 @@ class ModelSpec:
         return cls(name, (), (0,), tuple(entry.get("collisions", ("none",))), weights)
 
     def load(self, seed: int, train_missing: bool, archive: str | None = None
-             ) -> tuple[SwinGarEstimator, dict, str, Path]:
+             ) -> tuple[SwinGarEstimator, dict, str, str]:
         """The estimator of ``seed`` in eval mode, its descriptor settings, where
         it came from (a checkpoint, trained first if missing, its archived weights
-        when ``archive`` is given, or the model's weights) and that file."""
+        when ``archive`` is given, or the model's weights) and that file's sha256."""
         if self.weights is not None or archive is not None:
-            path = Path(weights_path(self.weights) if self.weights is not None
-                        else archived_run(self.configs, seed, train_missing, archive))
-            digest = weights_sha256(path)[:12]
-            return *load_pretrained(path), f"weights {path} (sha256 {digest}...)", path
+            path = (weights_path(self.weights) if self.weights is not None
+                    else archived_run(self.configs, seed, train_missing, archive))
+            digest = weights_sha256(path)
+            return *load_pretrained(path), f"weights {path} (sha256 {digest[:12]}...)", digest
         checkpoint = ensure_checkpoint(self.configs, seed, train_missing)
-        return *load_estimator(checkpoint), checkpoint, Path(checkpoint)
+        return *load_estimator(checkpoint), checkpoint, weights_sha256(checkpoint)
 
 
 @dataclass(frozen=True)
@@ -416,8 +416,8 @@ def run_report(config: ReportConfig, progress: bool = True, log=print,
     identities = []
     for model in config.models:
         for seed in model.seeds:
-            estimator, data, source, file = model.load(seed, config.train_missing,
-                                                       config.archive)
+            estimator, data, source, digest = model.load(seed, config.train_missing,
+                                                         config.archive)
             checkpoints[f"{model.name} (seed {seed})"] = source
             if seed == model.seeds[0]:
                 first_seeds[model.name] = estimator, data
@@ -429,7 +429,7 @@ def run_report(config: ReportConfig, progress: bool = True, log=print,
                 label = _label(model.name, precision, pass_)
                 identities.append({
                     **run_identity, "label": label, "seed": seed,
-                    "model_sha256": weights_sha256(file), "precision": precision,
+                    "model_sha256": digest, "precision": precision,
                     "collisions": pass_, "sigma": sigma, "descriptor_seed": descriptor_seed,
                     "body_sdf_sha256": body_sdf_sha256 if pass_ == "neural" else None})
                 collisions = {"none": None, "exact": "exact", "neural": neural}[pass_]
