@@ -110,7 +110,8 @@ def gate_spread(estimator: SwinGarEstimator, graph, body: AnnyBody,
 
 def _summary(row: dict) -> str:
     q = row["relative_weight_quantiles"]
-    return f"d*a 1-99 % {q['0.01']:.2f}-{q['0.99']:.2f}, entropy {row['mean_normalised_entropy']:.3f}"
+    return (f"d*a 1-99 % {q['0.01']:.2f}-{q['0.99']:.2f}, "
+            f"entropy {row['mean_normalised_entropy']:.3f}")
 
 
 def main() -> None:
