@@ -1,14 +1,20 @@
-"""Per-garment and per-sequence features computed once and stored in the
-dataset's HDF5 file, under ``/cache``, with the settings that made them.
+"""Per-garment and per-sequence features computed once and stored beside the
+dataset's HDF5 split file, one cache file per :class:`FeatureSettings`:
+``<split>.features-<key>.h5``, where ``key`` hashes the settings. Runs with
+different settings (an ablation's descriptor sizes, side by side) share one split
+file and never rewrite it; each finds its own cache.
 
-Layout added to a file of :mod:`swingar_pyg.world.sequence_file`::
+Layout of a cache file::
 
-    /cache                   attrs: settings (JSON of FeatureSettings)
-    /cache/garments/<name>/  edge_index (2,E) normals (N,3) [descriptor (z,)]
-    /cache/sequences/<id>/   joint_transforms (T,J,3,4) joint_positions (T,J,3)
+    /                        attrs: settings (JSON of FeatureSettings),
+                                    source (JSON: the split file's bytes and mtime)
+    /garments/<name>/        edge_index (2,E) normals (N,3) [descriptor (z,)]
+    /sequences/<id>/         joint_transforms (T,J,3,4) joint_positions (T,J,3)
                              body_points body_normals (P,3)
                              body_skin_indices body_skin_weights (P,K)
 
+A cache is current while its settings match and the split file is the one it was
+computed from (same size and modification time); otherwise it is computed again.
 The descriptor is :func:`~swingar_pyg.geometry.spectral_descriptor` with
 ``normalize=True`` (eigenvalues of ``A / N``, which depend little on mesh
 resolution). Body points are a farthest-point sample of the rest body's
@@ -19,8 +25,8 @@ the posed body.
 
 from __future__ import annotations
 
+import hashlib
 import json
-import shutil
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -62,14 +68,31 @@ class FeatureSettings:
         return json.dumps(asdict(self), sort_keys=True)
 
 
-def cached_settings(path: str | Path) -> FeatureSettings | None:
-    """The settings of the cache in ``path``, or ``None`` if it has none."""
+def feature_cache_path(path: str | Path, settings: FeatureSettings) -> Path:
+    """Where the cache of split file ``path`` for ``settings`` lives."""
+    path = Path(path)
+    key = hashlib.sha256(settings.to_json().encode()).hexdigest()[:12]
+    return path.with_name(f"{path.stem}.features-{key}.h5")
+
+
+def _source_identity(path: Path) -> str:
+    stat = path.stat()
+    return json.dumps({"bytes": stat.st_size, "modified_ns": stat.st_mtime_ns})
+
+
+def current_feature_cache(path: str | Path, settings: FeatureSettings) -> Path | None:
+    """The cache file of ``path`` for ``settings`` if it exists and was computed
+    from ``path`` as it is now, else ``None``."""
     import h5py
 
-    with h5py.File(path, "r") as file:
-        if "cache" not in file:
+    cache = feature_cache_path(path, settings)
+    if not cache.is_file():
+        return None
+    with h5py.File(cache, "r") as file:
+        if (file.attrs.get("settings") != settings.to_json()
+                or file.attrs.get("source") != _source_identity(Path(path))):
             return None
-        return FeatureSettings(**json.loads(file["cache"].attrs["settings"]))
+    return cache
 
 
 def farthest_points(points: np.ndarray, count: int) -> np.ndarray:
@@ -86,10 +109,10 @@ def farthest_points(points: np.ndarray, count: int) -> np.ndarray:
 
 def ensure_feature_cache(path: str | Path, settings: FeatureSettings, body_model=None,
                          progress: bool = True) -> bool:
-    """Computes the cache of ``path`` unless it exists with the same settings.
-
-    The file is copied, extended and renamed over the original, so a failure
-    leaves the original untouched. Returns whether anything was computed.
+    """Computes the cache of ``path`` for ``settings`` unless it is current
+    (:func:`current_feature_cache`). The split file is only read; the cache is
+    written to a temporary file and renamed into place, so a failure leaves no
+    half-written cache. Returns whether anything was computed.
 
     Args:
         path: a dataset split file.
@@ -101,19 +124,17 @@ def ensure_feature_cache(path: str | Path, settings: FeatureSettings, body_model
     import h5py
 
     path = Path(path)
-    if cached_settings(path) == settings:
+    if current_feature_cache(path, settings) is not None:
         return False
     if body_model is None:
         body_model = AnnyBody()
-    with atomic_path(path) as tmp:
-        shutil.copyfile(path, tmp)
-        with h5py.File(tmp, "a") as file:
-            if "cache" in file:
-                del file["cache"]
-            cache = file.create_group("cache")
-            _cache_garments(file, cache, settings, progress)
-            _cache_sequences(file, cache, settings, body_model, progress)
+    source_identity = _source_identity(path)
+    with atomic_path(feature_cache_path(path, settings)) as tmp:
+        with h5py.File(path, "r") as source, h5py.File(tmp, "w") as cache:
+            _cache_garments(source, cache, settings, progress)
+            _cache_sequences(source, cache, settings, body_model, progress)
             cache.attrs["settings"] = settings.to_json()
+            cache.attrs["source"] = source_identity
     return True
 
 

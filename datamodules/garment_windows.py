@@ -13,7 +13,7 @@ import torch
 from torch import Tensor
 from torch.utils.data import Dataset
 
-from datamodules.feature_cache import FeatureSettings, cached_settings
+from datamodules.feature_cache import FeatureSettings, current_feature_cache
 from swingar_pyg.models import GarmentWindow, pose_window
 from swingar_pyg.models.estimator import TARGET_FRAMES
 from swingar_pyg.models.garment_window import dense_skinning_weights
@@ -49,7 +49,7 @@ class GarmentWindowDataset(Dataset):
     """All windows of a dataset split file, held in memory.
 
     Args:
-        path: a split file whose feature cache exists
+        path: a split file whose feature cache for ``settings`` is current
             (:func:`~datamodules.feature_cache.ensure_feature_cache`).
         settings: the cache settings expected (a mismatch raises).
         history: pose history ``m``.
@@ -62,22 +62,24 @@ class GarmentWindowDataset(Dataset):
 
         if stride < 1:
             raise ValueError(f"stride must be >= 1, got {stride}")
-        found = cached_settings(path)
-        if found != settings:
-            raise ValueError(f"{path} has no feature cache for {settings} (it has {found}); "
+        cache_path = current_feature_cache(path, settings)
+        if cache_path is None:
+            raise ValueError(f"{path} has no current feature cache for {settings}; "
                              "run the datamodule's prepare_data() first")
         self.history = history
-        with h5py.File(path, "r") as file:
-            self.sequences = [self._read_sequence(file, k) for k in sorted(file["sequences"])]
+        with h5py.File(path, "r") as file, h5py.File(cache_path, "r") as cache:
+            self.sequences = [self._read_sequence(file, cache, k)
+                              for k in sorted(file["sequences"])]
             joints = self.sequences[0].joint_transforms.shape[1] if self.sequences else 0
             used = {s.garment for s in self.sequences}
-            self.garments = {name: self._read_garment(file, name, joints) for name in used}
+            self.garments = {name: self._read_garment(file, cache, name, joints)
+                             for name in used}
         self.windows = [(k, t) for k, s in enumerate(self.sequences)
                         for t in range(0, len(s.target), stride)]
 
     @staticmethod
-    def _read_garment(file, name: str, joints: int) -> _Garment:
-        source, cache = file[f"garments/{name}"], file[f"cache/garments/{name}"]
+    def _read_garment(file, cache_file, name: str, joints: int) -> _Garment:
+        source, cache = file[f"garments/{name}"], cache_file[f"garments/{name}"]
         descriptor = cache["descriptor"][:] if "descriptor" in cache else None
         return _Garment(
             rest=torch.as_tensor(source["rest_vertices"][:]),
@@ -89,8 +91,9 @@ class GarmentWindowDataset(Dataset):
             descriptor=None if descriptor is None else torch.as_tensor(descriptor))
 
     @staticmethod
-    def _read_sequence(file, sequence_id: str) -> _Sequence:
-        source, cache = file[f"sequences/{sequence_id}"], file[f"cache/sequences/{sequence_id}"]
+    def _read_sequence(file, cache_file, sequence_id: str) -> _Sequence:
+        source = file[f"sequences/{sequence_id}"]
+        cache = cache_file[f"sequences/{sequence_id}"]
         transforms = torch.as_tensor(cache["joint_transforms"][:])
         bottom = torch.tensor([0.0, 0.0, 0.0, 1.0]).expand(*transforms.shape[:2], 1, 4)
         body = {name: torch.as_tensor(cache[name][:]) for name in
