@@ -14,7 +14,6 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 from torch_geometric.data import Batch, Data
-from tqdm import tqdm
 
 from swingar_pyg.geometry import mesh_edge_index, spectral_descriptor, vertex_normals
 from swingar_pyg.geometry.spectral import DESCRIPTOR_SIGMA
@@ -40,6 +39,8 @@ def _milliseconds(start: float) -> float:
 def run_demo(garments: list[str] | None = None, z: int = 256, sigma: float = DESCRIPTOR_SIGMA,
              alpha: float = 2.0, device: str | None = None) -> list[GarmentReport]:
     """Runs the demo and prints a table; returns one report per garment."""
+    from tqdm import tqdm
+
     device = torch.device(device or ("cuda" if torch.cuda.is_available() else "cpu"))
     names = garments or shipped_garments()
     model = FCAStack(6, 64, layers=3, heads=4, alpha=alpha).to(device).eval()
