@@ -135,7 +135,9 @@ def main() -> None:
             graph = garment_graph(garment, len(body.joint_names), estimator.descriptor_size,
                                   record["data"]["sigma"], record["data"]["seed"])
             rows = layer_spread(estimator, graph)
-            gates = gate_spread(estimator, graph, body, shape)
+            # a network without M_d (``detail=False``) has no gates to measure
+            gates = {} if estimator.detail is None else gate_spread(estimator, graph, body,
+                                                                     shape)
             figures[label]["garments"][family] = rows
             figures[label]["detail_gates"][family] = gates
             print(f"{label:>14} {family:>9}: " + "; ".join(
@@ -152,10 +154,11 @@ def main() -> None:
     layers = len(next(iter(figures.values()))["garments"]["skirt"])
     panels = [(f"M_g layer {k}", lambda entry, family, k=k: entry["garments"][family][k])
               for k in range(layers)]
+    with_gates = all(entry["detail_gates"]["skirt"] for entry in figures.values())
     panels += [(f"M_d {name} maps, {gate} gate",
                 lambda entry, family, name=name, gate=gate:
                 entry["detail_gates"][family][name][gate])
-               for name in ("input", "state") for gate in GATES]
+               for name in ("input", "state") for gate in GATES if with_gates]
     columns = len(GATES)
     rows_ = -(-len(panels) // columns)
     figure, axes = plt.subplots(rows_, columns, figsize=(4.5 * columns, 3.8 * rows_),

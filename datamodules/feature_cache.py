@@ -1,20 +1,25 @@
 """Per-garment and per-sequence features computed once and stored beside the
 dataset's HDF5 split file, one cache file per :class:`FeatureSettings`:
-``<split>.features-<key>.h5``, where ``key`` hashes the settings. Runs with
-different settings (an ablation's descriptor sizes, side by side) share one split
-file and never rewrite it; each finds its own cache.
+``<split file name>.features-<key>.h5``, where ``key`` hashes the settings and
+the cache format. Runs with different settings (an ablation's descriptor sizes,
+side by side) share one split file and never rewrite it; each finds its own
+cache. Runs that need the same cache at once compute it once: the first takes a
+lock (``<cache>.lock``), the others wait and read what it wrote.
 
 Layout of a cache file::
 
-    /                        attrs: settings (JSON of FeatureSettings),
-                                    source (JSON: the split file's bytes and mtime)
+    /                        attrs: settings (JSON of FeatureSettings and the format),
+                                    source (JSON: the split file's device, inode,
+                                    bytes and mtime)
     /garments/<name>/        edge_index (2,E) normals (N,3) [descriptor (z,)]
     /sequences/<id>/         joint_transforms (T,J,3,4) joint_positions (T,J,3)
                              body_points body_normals (P,3)
                              body_skin_indices body_skin_weights (P,K)
 
 A cache is current while its settings match and the split file is the one it was
-computed from (same size and modification time); otherwise it is computed again.
+computed from (same file, size and modification time); otherwise, or when it
+cannot be read, it is computed again. A copy of the data folder is a new file:
+its caches are computed again.
 The descriptor is :func:`~swingar_pyg.geometry.spectral_descriptor` with
 ``normalize=True`` (eigenvalues of ``A / N``, which depend little on mesh
 resolution). Body points are a farthest-point sample of the rest body's
@@ -25,6 +30,7 @@ the posed body.
 
 from __future__ import annotations
 
+import fcntl
 import hashlib
 import json
 from dataclasses import asdict, dataclass
@@ -38,6 +44,10 @@ from swingar_pyg.geometry import as_mesh, vertex_normals
 from swingar_pyg.geometry.spectral import DESCRIPTOR_SIGMA
 from swingar_pyg.models.garment_window import garment_graph_features
 from swingar_pyg.world.body import AnnyBody
+
+# Raised whenever what a cache holds, or how it is computed, changes: old caches
+# then no longer match and are computed again.
+CACHE_FORMAT = 1
 
 
 @dataclass(frozen=True)
@@ -68,31 +78,39 @@ class FeatureSettings:
         return json.dumps(asdict(self), sort_keys=True)
 
 
+def _cache_key(settings: FeatureSettings) -> str:
+    return json.dumps({"format": CACHE_FORMAT, "settings": json.loads(settings.to_json())},
+                      sort_keys=True)
+
+
 def feature_cache_path(path: str | Path, settings: FeatureSettings) -> Path:
     """Where the cache of split file ``path`` for ``settings`` lives."""
     path = Path(path)
-    key = hashlib.sha256(settings.to_json().encode()).hexdigest()[:12]
-    return path.with_name(f"{path.stem}.features-{key}.h5")
+    key = hashlib.sha256(_cache_key(settings).encode()).hexdigest()[:12]
+    return path.with_name(f"{path.name}.features-{key}.h5")
 
 
 def _source_identity(path: Path) -> str:
     stat = path.stat()
-    return json.dumps({"bytes": stat.st_size, "modified_ns": stat.st_mtime_ns})
+    return json.dumps({"device": stat.st_dev, "inode": stat.st_ino, "bytes": stat.st_size,
+                       "modified_ns": stat.st_mtime_ns})
 
 
 def current_feature_cache(path: str | Path, settings: FeatureSettings) -> Path | None:
-    """The cache file of ``path`` for ``settings`` if it exists and was computed
-    from ``path`` as it is now, else ``None``."""
+    """The cache file of ``path`` for ``settings`` if it exists, can be read and
+    was computed from ``path`` as it is now, else ``None``."""
     import h5py
 
     cache = feature_cache_path(path, settings)
     if not cache.is_file():
         return None
-    with h5py.File(cache, "r") as file:
-        if (file.attrs.get("settings") != settings.to_json()
-                or file.attrs.get("source") != _source_identity(Path(path))):
-            return None
-    return cache
+    try:
+        with h5py.File(cache, "r") as file:
+            current = (file.attrs.get("settings") == _cache_key(settings)
+                       and file.attrs.get("source") == _source_identity(Path(path)))
+    except OSError:  # truncated or not HDF5: computed again
+        return None
+    return cache if current else None
 
 
 def farthest_points(points: np.ndarray, count: int) -> np.ndarray:
@@ -112,7 +130,9 @@ def ensure_feature_cache(path: str | Path, settings: FeatureSettings, body_model
     """Computes the cache of ``path`` for ``settings`` unless it is current
     (:func:`current_feature_cache`). The split file is only read; the cache is
     written to a temporary file and renamed into place, so a failure leaves no
-    half-written cache. Returns whether anything was computed.
+    half-written cache. Under the cache's lock: a second process asking for the
+    same cache waits and reuses it, and temporary files a killed process left
+    behind are removed. Returns whether anything was computed.
 
     Args:
         path: a dataset split file.
@@ -126,15 +146,22 @@ def ensure_feature_cache(path: str | Path, settings: FeatureSettings, body_model
     path = Path(path)
     if current_feature_cache(path, settings) is not None:
         return False
-    if body_model is None:
-        body_model = AnnyBody()
-    source_identity = _source_identity(path)
-    with atomic_path(feature_cache_path(path, settings)) as tmp:
-        with h5py.File(path, "r") as source, h5py.File(tmp, "w") as cache:
-            _cache_garments(source, cache, settings, progress)
-            _cache_sequences(source, cache, settings, body_model, progress)
-            cache.attrs["settings"] = settings.to_json()
-            cache.attrs["source"] = source_identity
+    target = feature_cache_path(path, settings)
+    with open(target.with_name(target.name + ".lock"), "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if current_feature_cache(path, settings) is not None:  # another process made it
+            return False
+        for leftover in target.parent.glob(f".{target.name}.*.tmp"):
+            leftover.unlink(missing_ok=True)
+        if body_model is None:
+            body_model = AnnyBody()
+        source_identity = _source_identity(path)
+        with atomic_path(target) as tmp:
+            with h5py.File(path, "r") as source, h5py.File(tmp, "w") as cache:
+                _cache_garments(source, cache, settings, progress)
+                _cache_sequences(source, cache, settings, body_model, progress)
+                cache.attrs["settings"] = _cache_key(settings)
+                cache.attrs["source"] = source_identity
     return True
 
 

@@ -27,8 +27,9 @@ class SwinGarDataModule(L.LightningDataModule):
 
     ``prepare_data`` generates the dataset if a split file is missing (through
     :func:`~swingar_pyg.world.dataset.make_dataset`), then computes each file's
-    feature cache (descriptor, graph, body poses) unless it is there with the
-    same settings. ``setup`` reads the splits, which the generator already made
+    feature cache (descriptor, graph, body poses), stored beside it
+    (:mod:`datamodules.feature_cache`), unless one with the same settings was
+    computed from the file as it is. ``setup`` reads the splits, which the generator already made
     disjoint by garment and by motion family.
 
     Args:

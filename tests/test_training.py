@@ -178,36 +178,6 @@ def test_checkpoint_round_trip_gives_identical_predictions(tiny_windows, tmp_pat
         assert not torch.equal(module(batch).vertices, module(batch).skinned)
 
 
-def test_feature_cache_is_reused_and_recomputed_when_settings_change(tiny_windows):
-    from datamodules import FeatureSettings, GarmentWindowDataset, ensure_feature_cache
-    from datamodules.feature_cache import current_feature_cache, feature_cache_path
-
-    path = tiny_windows.split_path('val')
-    copy = path.with_name('copy.h5')
-    shutil.copyfile(path, copy)
-    stamp, content = os.stat(copy).st_mtime_ns, copy.read_bytes()
-    settings = tiny_windows.settings
-    other = FeatureSettings(**{**settings.__dict__, 'descriptor_size': 8})
-    assert ensure_feature_cache(copy, settings, progress=False)
-    assert not ensure_feature_cache(copy, settings, progress=False)
-    assert ensure_feature_cache(copy, other, progress=False)
-    # both caches stand side by side; the split file itself is never written
-    assert feature_cache_path(copy, settings) != feature_cache_path(copy, other)
-    assert current_feature_cache(copy, settings) is not None
-    assert not ensure_feature_cache(copy, settings, progress=False)
-    assert os.stat(copy).st_mtime_ns == stamp and copy.read_bytes() == content
-    assert GarmentWindowDataset(copy, other, history=8)[0].descriptor.shape == (1, 8)
-    assert GarmentWindowDataset(copy, settings, history=8)[0].descriptor.shape == (
-        1, settings.descriptor_size)
-    # a split file made again (another size or time) makes its caches stale
-    os.utime(copy, ns=(stamp, stamp + 1))
-    assert current_feature_cache(copy, other) is None
-    with pytest.raises(ValueError, match='no current feature cache'):
-        GarmentWindowDataset(copy, other)
-    assert ensure_feature_cache(copy, other, progress=False)
-    assert not list(copy.parent.glob('*.tmp'))
-
-
 class _RecordBatches(L.Callback):
     def __init__(self):
         self.seen = []
