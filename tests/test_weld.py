@@ -96,3 +96,21 @@ def test_a_garment_with_a_split_seam_is_welded_with_a_warning_and_simulates():
                             backend='warp')
     result = simulate_sequence(body, shape, garment, motion, settings).result
     assert torch.isfinite(result.positions).all() and result.max_stretch.max() < 0.5
+
+
+def test_a_garment_in_other_units_or_axes_is_refused_with_the_likely_cause():
+    require('anny')
+    from swingar_pyg.world.body import AnnyBody
+    from swingar_pyg.world.garment import garment_on_body
+    from swingar_pyg.world.garment_assets import fit_shipped_garment
+
+    body = AnnyBody()
+    shape = body.default_shape()
+    top = fit_shipped_garment('sport_top', body, shape).mesh
+    in_decimetres = as_mesh(top.vertices * 10.0, top.faces)
+    with pytest.raises(ValueError, match=r"'top' is .* m across .* metres, \+Z up.*decimetres"):
+        garment_on_body('top', in_decimetres, body, shape)
+    y_up_at_the_feet = as_mesh(top.vertices[:, [0, 2, 1]] + [0.0, 0.0, -1.5], top.faces)
+    with pytest.raises(ValueError, match=r"'top' lies away from the rest body: 0% of its"):
+        garment_on_body('top', y_up_at_the_feet, body, shape)
+    assert garment_on_body('top', top, body, shape).mesh.num_vertices == top.num_vertices

@@ -144,6 +144,30 @@ def top_boundary_loops(mesh: Mesh, band: float = 0.1) -> np.ndarray:
     return np.sort(np.concatenate([loop for loop, z in zip(loops, heights) if z >= top - band]))
 
 
+def refuse_undressed(name: str, mesh: Mesh, rest: np.ndarray) -> None:
+    """Raises a ``ValueError`` naming the likely cause when ``mesh`` cannot be a
+    garment dressed on the rest body ``rest`` ``(V, 3)`` in the package's units and
+    axes: larger than twice the body's height (another unit: MakeHuman's OBJ files
+    are in decimetres, many DCC exports in centimetres), or with fewer than half
+    of its vertices within a quarter of that height of the body's bounding box
+    (another up axis or origin)."""
+    height = float(np.ptp(rest, axis=0).max())
+    size = float(np.ptp(mesh.vertices, axis=0).max())
+    hint = ("give it in metres, +Z up, dressed on the rest body of the shape it is "
+            "animated with")
+    if size > 2.0 * height:
+        raise ValueError(f"garment {name!r} is {size:.3g} m across and the rest body "
+                         f"{height:.2f} m tall: {hint} (MakeHuman's OBJ files are in "
+                         "decimetres and +Y up, many DCC exports in centimetres)")
+    margin = 0.25 * height
+    near = np.all((mesh.vertices >= rest.min(axis=0) - margin)
+                  & (mesh.vertices <= rest.max(axis=0) + margin), axis=1).mean()
+    if near < 0.5:
+        raise ValueError(f"garment {name!r} lies away from the rest body: {near:.0%} of its "
+                         f"vertices are within {margin:.2f} m of the body's bounding box; "
+                         f"{hint} (another up axis or origin moves it off the body)")
+
+
 def garment_on_body(name: str, mesh: Mesh, body: BodyModel, shape,
                     pinned: np.ndarray | None = None) -> Garment:
     """A garment mesh already dressed on ``body``'s rest pose with ``shape``
@@ -156,7 +180,8 @@ def garment_on_body(name: str, mesh: Mesh, body: BodyModel, shape,
     (:func:`~swingar_pyg.geometry.weld.weld_mesh`, with a warning saying what
     changed; ``pinned`` is carried over to the welded indices), and vertices nearer
     the body than :data:`DRESSING_CLEARANCE` are moved out to it
-    (:func:`~swingar_pyg.geometry.signed_distance.push_out`)."""
+    (:func:`~swingar_pyg.geometry.signed_distance.push_out`). A mesh in other
+    units or axes is refused (:func:`refuse_undressed`)."""
     mesh, welded = weld_mesh(as_mesh(mesh.vertices, mesh.faces))
     if welded:
         warnings.warn(f"garment {name!r}: {welded}", stacklevel=2)
@@ -164,6 +189,7 @@ def garment_on_body(name: str, mesh: Mesh, body: BodyModel, shape,
             pinned = np.unique(welded.new_index[np.asarray(pinned, np.int64)])
             pinned = pinned[pinned >= 0]
     rest = body.rest_vertices(shape).numpy().astype(np.float64)
+    refuse_undressed(name, mesh, rest)
     faces = body.faces.numpy()
     mesh = push_out(mesh, rest, faces, DRESSING_CLEARANCE)
     pinned = top_boundary_loops(mesh) if pinned is None else np.asarray(pinned, np.int64)
